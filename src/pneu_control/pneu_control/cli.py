@@ -1,0 +1,74 @@
+"""``pneu``: the user's command line. One subcommand per module.
+
+Each subcommand module exposes ``NAME``, ``HELP``, ``add_arguments(parser)``
+and ``run(args) -> int``. User errors (bad config, bad option values, bad
+files) reach the user as one line on stderr and a non-zero exit, never a
+traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+__all__ = ["main", "SUBCOMMANDS"]
+
+# (subcommand, module) -- modules are imported lazily so one missing optional
+# dependency never breaks the others.
+SUBCOMMANDS: tuple[tuple[str, str], ...] = (
+    ("sim", "pneu_sim.cli_sim"),
+    ("run", "pneu_control.cli_run"),
+    ("paper", "pneu_control.cli_paper"),
+    ("analyze", "pneu_control.cli_analyze"),
+    ("plot", "pneu_control.cli_plot"),
+    ("compare", "pneu_control.cli_compare"),
+    ("replay", "pneu_control.cli_replay"),
+    ("bench", "pneu_control.cli_bench"),
+)
+
+
+class UserError(Exception):
+    """An error the user can fix; printed as one line."""
+
+
+def _available() -> list[tuple[str, object]]:
+    mods = []
+    for name, modname in SUBCOMMANDS:
+        try:
+            mods.append((name, importlib.import_module(modname)))
+        except ModuleNotFoundError as err:
+            if err.name and (err.name == modname or modname.startswith(err.name + ".")):
+                continue  # subcommand not built yet
+            raise
+    return mods
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="pneu",
+        description="pneu: servo stack for a linear-rotary pneumatic actuator (twin, controllers, bags).",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, mod in _available():
+        p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)  # argparse exits 2 with a usage line on bad options
+    try:
+        return int(args._run(args) or 0)
+    except KeyboardInterrupt:
+        print("pneu: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, OSError, UserError) as err:
+        print(f"pneu {args.command}: error: {err}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,42 @@
+import os
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "pneu_control"
+
+data_files = [
+    ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+    (os.path.join("share", PACKAGE), ["package.xml"]),
+    (os.path.join("share", PACKAGE, "config"), sorted(glob("config/*.yaml"))),
+    (os.path.join("share", PACKAGE, "launch"), sorted(glob("launch/*.launch.py"))),
+]
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=data_files,
+    install_requires=[
+        "setuptools",
+        "pneu_msgs_py",
+        "pneu_sim",
+        "pneu_driver",
+        "numpy>=1.26",
+        "PyYAML>=6.0",
+        "matplotlib>=3.7",
+    ],
+    zip_safe=True,
+    maintainer="pneu developers",
+    maintainer_email="pneu@example.org",
+    description="Controllers (PID, LADRC, ESO-SMC and better), references, in-process experiment runner, bag analysis and the pneu CLI.",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "pneu = pneu_control.cli:main",
+            "linear_controller = pneu_control.controller_node:main_linear",
+            "rotary_controller = pneu_control.controller_node:main_rotary",
+            "logger = pneu_control.logger_node:main",
+        ],
+    },
+)

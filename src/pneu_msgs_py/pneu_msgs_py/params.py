@@ -1,0 +1,316 @@
+"""Parameter dataclasses: one declaration, validated in one place.
+
+Every parameter group in pneu is a frozen dataclass whose fields are made with
+:func:`param`. The field metadata (unit, allowed range, description, source,
+read-only flag, choices) drives, from a single declaration:
+
+- :func:`validate` -- type, finiteness, range and choice checks, plus the
+  group's own cross-field ``_check()`` method if it has one;
+- :func:`from_dict` -- strict loading from YAML-shaped dicts (missing key,
+  unknown key, wrong type all refused, nothing half-loaded);
+- :func:`flatten` / :func:`with_updates` -- dotted names as ROS 2 parameters
+  use them (``eso_smc.epsilon``), and a whole-set update that is validated
+  as one and leaves the old object untouched when refused;
+- :func:`describe` -- what an rclpy shell turns into ``ParameterDescriptor``.
+
+No rclpy here: shells convert :class:`ParamSpec` into descriptors themselves.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = [
+    "ParamError",
+    "ParamSpec",
+    "param",
+    "validate",
+    "from_dict",
+    "to_dict",
+    "flatten",
+    "with_updates",
+    "describe",
+]
+
+
+class ParamError(ValueError):
+    """A parameter value was refused; the message names the key, value and range."""
+
+    def __init__(self, key: str, value: Any, allowed: str):
+        self.key = key
+        self.value = value
+        self.allowed = allowed
+        super().__init__(f"{key}: {value!r} refused; allowed: {allowed}")
+
+
+def param(
+    default: Any = dataclasses.MISSING,
+    *,
+    unit: str = "",
+    desc: str = "",
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    choices: tuple[str, ...] | None = None,
+    source: str = "",
+    read_only: bool = False,
+) -> Any:
+    """A dataclass field with pneu metadata.
+
+    ``lo``/``hi`` are inclusive bounds unless ``lo_open``/``hi_open``.
+    ``read_only`` marks values whose change needs a restart (ROS descriptor).
+    """
+    meta = {
+        "pneu": True,
+        "unit": unit,
+        "desc": desc,
+        "lo": lo,
+        "hi": hi,
+        "lo_open": lo_open,
+        "hi_open": hi_open,
+        "choices": choices,
+        "source": source,
+        "read_only": read_only,
+    }
+    if dataclasses.is_dataclass(default) and not isinstance(default, type):
+        return dataclasses.field(default_factory=lambda d=default: d, metadata=meta)
+    if isinstance(default, type) and dataclasses.is_dataclass(default):
+        return dataclasses.field(default_factory=default, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One flattened parameter, as an rclpy shell declares it."""
+
+    name: str
+    default: Any
+    type: type
+    unit: str
+    description: str
+    lo: float | None
+    hi: float | None
+    read_only: bool
+    choices: tuple[str, ...] | None
+
+
+def _allowed_text(meta: Mapping[str, Any], typ: type) -> str:
+    if meta.get("choices"):
+        return "one of " + ", ".join(meta["choices"])
+    lo, hi = meta.get("lo"), meta.get("hi")
+    unit = f" {meta['unit']}" if meta.get("unit") else ""
+    if lo is None and hi is None:
+        return f"any finite {typ.__name__}{unit}"
+    left = "(" if meta.get("lo_open") else "["
+    right = ")" if meta.get("hi_open") else "]"
+    lo_s = "-inf" if lo is None else f"{lo:g}"
+    hi_s = "inf" if hi is None else f"{hi:g}"
+    return f"{left}{lo_s}, {hi_s}{right}{unit}"
+
+
+def _field_types(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _base_type(tp: Any) -> Any:
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return args[0] if len(args) == 1 else tp
+    return tp
+
+
+def _check_value(key: str, value: Any, tp: Any, meta: Mapping[str, Any]) -> Any:
+    """Coerce (int -> float only) and check one scalar value; return it."""
+    tp = _base_type(tp)
+    allowed = _allowed_text(meta, tp if isinstance(tp, type) else float)
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParamError(key, value, f"a number, {allowed}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParamError(key, value, allowed)
+    elif tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ParamError(key, value, f"an integer, {allowed}")
+    elif tp is bool:
+        if not isinstance(value, bool):
+            raise ParamError(key, value, "true or false")
+        return value
+    elif tp is str:
+        if not isinstance(value, str):
+            raise ParamError(key, value, f"a string, {allowed}")
+    elif typing.get_origin(tp) is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise ParamError(key, value, "a list of numbers")
+        out = []
+        for i, v in enumerate(value):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ParamError(f"{key}[{i}]", v, "a finite number")
+            out.append(float(v))
+        return tuple(out)
+    else:
+        return value
+    choices = meta.get("choices")
+    if choices and value not in choices:
+        raise ParamError(key, value, allowed)
+    lo, hi = meta.get("lo"), meta.get("hi")
+    if lo is not None and (value < lo or (meta.get("lo_open") and value == lo)):
+        raise ParamError(key, value, allowed)
+    if hi is not None and (value > hi or (meta.get("hi_open") and value == hi)):
+        raise ParamError(key, value, allowed)
+    return value
+
+
+def validate(obj: Any, prefix: str = "") -> Any:
+    """Check every field of ``obj`` (recursively) and its ``_check()``; return ``obj``."""
+    hints = _field_types(type(obj))
+    for f in dataclasses.fields(obj):
+        key = f"{prefix}{f.name}"
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            validate(value, prefix=f"{key}.")
+        elif f.metadata.get("pneu"):
+            checked = _check_value(key, value, hints[f.name], f.metadata)
+            if checked != value or type(checked) is not type(value):
+                object.__setattr__(obj, f.name, checked)
+    check = getattr(obj, "_check", None)
+    if check is not None:
+        try:
+            check()
+        except ParamError as err:
+            if prefix and not err.key.startswith(prefix):
+                raise ParamError(prefix + err.key, err.value, err.allowed) from None
+            raise
+    return obj
+
+
+def from_dict(cls: type, data: Mapping[str, Any], *, strict: bool = True, prefix: str = "") -> Any:
+    """Build and validate ``cls`` from a nested mapping.
+
+    ``strict``: every field must be present (plant.yaml); otherwise missing
+    fields take their defaults (controller and safety groups). Unknown keys
+    are always refused.
+    """
+    if not isinstance(data, Mapping):
+        raise ParamError(prefix.rstrip(".") or cls.__name__, data, "a mapping of parameters")
+    hints = _field_types(cls)
+    names = {f.name: f for f in dataclasses.fields(cls)}
+    for key in data:
+        if key not in names:
+            raise ParamError(
+                f"{prefix}{key}", data[key], "no such parameter; known: " + ", ".join(names)
+            )
+    kwargs: dict[str, Any] = {}
+    for name, f in names.items():
+        key = f"{prefix}{name}"
+        tp = _base_type(hints[name])
+        if name not in data:
+            has_default = (
+                f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
+            )
+            if strict or not has_default:
+                raise ParamError(key, None, "required; " + _allowed_text(f.metadata, float))
+            continue
+        value = data[name]
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+            kwargs[name] = from_dict(tp, value, strict=strict, prefix=f"{key}.")
+        else:
+            kwargs[name] = _check_value(key, value, tp, f.metadata)
+    obj = cls(**kwargs)
+    return validate(obj, prefix=prefix)
+
+
+def to_dict(obj: Any) -> dict[str, Any]:
+    """Nested plain dict (YAML/JSON-ready) of a parameter dataclass."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            out[f.name] = to_dict(value)
+        elif isinstance(value, tuple):
+            out[f.name] = list(value)
+        else:
+            out[f.name] = value
+    return out
+
+
+def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
+    """``{"eso_smc.epsilon": 1200.0, ...}`` -- ROS 2 dotted parameter names."""
+    out: dict[str, Any] = {}
+    for key, value in to_dict(obj).items():
+        if isinstance(value, dict):
+            sub = _flatten_dict(value, f"{prefix}{key}.")
+            out.update(sub)
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def _flatten_dict(d: Mapping[str, Any], prefix: str) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in d.items():
+        if isinstance(value, Mapping):
+            out.update(_flatten_dict(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def with_updates(obj: Any, updates: Mapping[str, Any]) -> Any:
+    """A new validated object with dotted-name ``updates`` applied as one set.
+
+    Raises :class:`ParamError` naming the first bad key; ``obj`` is unchanged.
+    """
+    nested = to_dict(obj)
+    known = flatten(obj)
+    for key, value in updates.items():
+        if key not in known:
+            raise ParamError(key, value, "no such parameter")
+        node = nested
+        parts = key.split(".")
+        for part in parts[:-1]:
+            node = node[part]
+        node[parts[-1]] = value
+    return from_dict(type(obj), nested, strict=True)
+
+
+def describe(cls_or_obj: Any, prefix: str = "") -> list[ParamSpec]:
+    """Flattened :class:`ParamSpec` list, defaults taken from ``cls_or_obj``."""
+    obj = cls_or_obj() if isinstance(cls_or_obj, type) else cls_or_obj
+    hints = _field_types(type(obj))
+    specs: list[ParamSpec] = []
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        name = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(value):
+            specs.extend(describe(value, prefix=f"{name}."))
+            continue
+        meta = f.metadata
+        tp = _base_type(hints[f.name])
+        desc = meta.get("desc", "")
+        if meta.get("unit"):
+            desc = f"{desc} [{meta['unit']}]"
+        if meta.get("source"):
+            desc = f"{desc} (source: {meta['source']})"
+        specs.append(
+            ParamSpec(
+                name=name,
+                default=list(value) if isinstance(value, tuple) else value,
+                type=tp if isinstance(tp, type) else list,
+                unit=meta.get("unit", ""),
+                description=desc.strip(),
+                lo=meta.get("lo"),
+                hi=meta.get("hi"),
+                read_only=bool(meta.get("read_only")),
+                choices=meta.get("choices"),
+            )
+        )
+    return specs

@@ -1,0 +1,73 @@
+"""The parameter framework: strict loading, range errors, whole-set updates."""
+
+from dataclasses import dataclass
+
+import pytest
+from pneu_msgs_py.params import ParamError, describe, flatten, from_dict, param, with_updates
+
+
+@dataclass(frozen=True)
+class Inner:
+    epsilon: float = param(1200.0, unit="mm/s^3", lo=0.0, lo_open=True, desc="reaching gain")
+    n: int = param(3, lo=1, hi=10)
+
+
+@dataclass(frozen=True)
+class Outer:
+    algorithm: str = param("pid", choices=("pid", "ladrc", "eso_smc"))
+    omega_0: float = param(25.0, unit="rad/s", lo=0.0, hi=500.0)
+    inner: Inner = param(Inner)
+
+    def _check(self):
+        if self.algorithm == "ladrc" and self.omega_0 < 1.0:
+            raise ParamError("omega_0", self.omega_0, "[1, 500] rad/s with ladrc")
+
+
+def test_defaults_and_flatten():
+    o = from_dict(Outer, {}, strict=False)
+    assert flatten(o) == {
+        "algorithm": "pid",
+        "omega_0": 25.0,
+        "inner.epsilon": 1200.0,
+        "inner.n": 3,
+    }
+
+
+def test_strict_missing_key_named():
+    with pytest.raises(ParamError, match=r"^inner: None refused"):
+        from_dict(Outer, {"algorithm": "pid", "omega_0": 1.0}, strict=True)
+
+
+def test_unknown_key_and_wrong_type():
+    with pytest.raises(ParamError, match="inner.bogus"):
+        from_dict(Outer, {"inner": {"bogus": 1}}, strict=False)
+    with pytest.raises(ParamError, match="omega_0: 'fast' refused; allowed: a number"):
+        from_dict(Outer, {"omega_0": "fast"}, strict=False)
+    with pytest.raises(ParamError, match=r"inner.n: 2.5 refused; allowed: an integer"):
+        from_dict(Outer, {"inner": {"n": 2.5}}, strict=False)
+
+
+def test_range_message_names_bounds():
+    with pytest.raises(
+        ParamError, match=r"inner.epsilon: -1.0 refused; allowed: \(0, inf\] mm/s\^3"
+    ):
+        from_dict(Outer, {"inner": {"epsilon": -1.0}}, strict=False)
+    with pytest.raises(ParamError, match=r"allowed: \(0, inf\]"):
+        from_dict(Outer, {"inner": {"epsilon": 0.0}}, strict=False)  # open bound, exactly at it
+    assert from_dict(Outer, {"omega_0": 500.0}, strict=False).omega_0 == 500.0  # closed bound
+
+
+def test_with_updates_is_atomic():
+    o = from_dict(Outer, {}, strict=False)
+    with pytest.raises(ParamError, match="omega_0"):
+        with_updates(o, {"algorithm": "ladrc", "omega_0": 0.5})  # each valid alone, not together
+    assert o.algorithm == "pid" and o.omega_0 == 25.0
+    o2 = with_updates(o, {"inner.epsilon": 900, "algorithm": "ladrc"})
+    assert o2.inner.epsilon == 900.0 and isinstance(o2.inner.epsilon, float)
+    assert o.inner.epsilon == 1200.0
+
+
+def test_describe_specs():
+    specs = {s.name: s for s in describe(Outer)}
+    assert specs["inner.epsilon"].lo == 0.0 and "mm/s^3" in specs["inner.epsilon"].description
+    assert specs["algorithm"].choices == ("pid", "ladrc", "eso_smc")

@@ -1,0 +1,6 @@
+#!/usr/bin/env bash
+# The main job: set up .venv and reproduce the paper's experiments on the twin.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash tools/bootstrap.sh
+.venv/bin/pneu paper --out "${1:-out/paper}"
