@@ -1,0 +1,192 @@
+"""LockstepCore (the sim node's bookkeeping) against a fake plant and fake controllers."""
+
+from __future__ import annotations
+
+import pytest
+from pneu_msgs_py.params import ParamError, from_dict, validate
+from pneu_msgs_py.samples import NEUTRAL_V, SensorSample
+from pneu_sim.lockstep import LockstepCore, SimNodeParams, active_axes
+
+T_NS = 1_000_000
+
+
+class FakePlant:
+    """x integrates u_linear, omega = u_rotary: the applied commands are readable."""
+
+    T = 0.001
+
+    def __init__(self):
+        self.applied: list[tuple[float, float]] = []
+
+    def _sample(self, k, x, omega):
+        return SensorSample(k, k * T_NS, 2e5, 2e5, 1e5, x, 0.0, omega, 0)
+
+    def reset(self, x0=0.0):
+        self.k, self.x = 0, x0
+        self.applied.clear()
+        return self._sample(0, self.x, 0.0)
+
+    def step(self, u_l, u_r):
+        self.applied.append((u_l, u_r))
+        self.k += 1
+        self.x += u_l
+        return self._sample(self.k, self.x, u_r)
+
+
+def fake_controller(s: SensorSample) -> float:
+    return 1.0 + 0.01 * s.k  # u_k depends on k: the delay is visible
+
+
+def test_lockstep_applies_u_k_minus_1_like_the_runner():
+    plant = FakePlant()
+    core = LockstepCore(plant, axes=("linear",))
+    s = core.reset()
+    ref_plant = FakePlant()
+    rs = ref_plant.reset()
+    u_hold = NEUTRAL_V
+    for _ in range(50):
+        # ROS side: the controller answers the published sample
+        assert not core.complete and core.waiting_for == ("linear",)
+        assert core.offer("linear", s.stamp_ns, fake_controller(s)) == "accepted"
+        assert core.complete
+        s = core.advance()
+        # runner side (pneu_control.runner.run): u_k = update(s_k); s_{k+1} = step(u_{k-1})
+        u = fake_controller(rs)
+        rs = ref_plant.step(u_hold, NEUTRAL_V)
+        u_hold = u
+        assert s == rs
+    assert plant.applied == ref_plant.applied
+    assert plant.applied[0] == (NEUTRAL_V, NEUTRAL_V)  # before the first answer
+    assert plant.applied[1] == (1.0, NEUTRAL_V)  # u_0 drives the step 1 -> 2
+    assert core.timeouts == {"linear": 0} and core.steps == 50
+
+
+def test_lockstep_rejects_answers_to_other_samples():
+    core = LockstepCore(FakePlant(), axes=("linear", "rotary"))
+    s = core.reset()
+    assert core.offer("linear", s.stamp_ns - T_NS, 3.0) == "stale"
+    assert core.offer("linear", s.stamp_ns + T_NS, 3.0) == "stale"
+    assert core.offer("linear", s.stamp_ns, 3.0) == "accepted"
+    assert not core.complete and core.waiting_for == ("rotary",)
+    assert core.offer("rotary", s.stamp_ns, 6.0) == "accepted"
+    assert core.complete
+    assert core.stale == {"linear": 2, "rotary": 0}
+
+
+def test_inactive_axis_holds_neutral_and_is_ignored():
+    plant = FakePlant()
+    core = LockstepCore(plant, axes=("rotary",))
+    s = core.reset()
+    assert core.offer("linear", s.stamp_ns, 9.0) == "inactive"
+    core.offer("rotary", s.stamp_ns, 7.0)
+    core.advance()
+    s = core.sample
+    core.offer("rotary", s.stamp_ns, 7.5)
+    core.advance()
+    assert plant.applied == [(NEUTRAL_V, NEUTRAL_V), (NEUTRAL_V, 7.0)]
+
+
+def test_timeout_is_counted_and_previous_command_held():
+    plant = FakePlant()
+    core = LockstepCore(plant, axes=("linear", "rotary"))
+    s = core.reset()
+    core.offer("linear", s.stamp_ns, 2.0)
+    core.offer("rotary", s.stamp_ns, 8.0)
+    s = core.advance()
+    core.offer("linear", s.stamp_ns, 3.0)  # rotary never answers sample 1
+    s = core.advance()  # the node's timeout fired
+    assert core.timeouts == {"linear": 0, "rotary": 1}
+    core.offer("linear", s.stamp_ns, 4.0)
+    core.offer("rotary", s.stamp_ns, 9.0)
+    core.advance()
+    # step 2->3 runs under the answers to sample 1: linear 3.0, rotary still 8.0
+    assert plant.applied == [(5.0, 5.0), (2.0, 8.0), (3.0, 8.0)]
+    assert core.counters()["timeouts.rotary"] == 1
+
+
+def test_realtime_takes_newest_answer_and_counts_missed_periods():
+    plant = FakePlant()
+    core = LockstepCore(plant, axes=("linear",), mode="realtime")
+    s0 = core.reset()
+    s1 = core.advance()  # no answer in the first period
+    assert core.missed == {"linear": 1}
+    assert core.offer("linear", s0.stamp_ns, 2.0) == "accepted"  # late answer to s0
+    assert core.offer("linear", s1.stamp_ns, 3.0) == "accepted"  # newer one wins
+    assert core.offer("linear", s0.stamp_ns, 2.5) == "stale"  # older than accepted
+    core.advance()
+    core.advance()
+    assert plant.applied == [(5.0, 5.0), (5.0, 5.0), (3.0, 5.0)]
+    assert core.stale == {"linear": 1} and core.missed == {"linear": 2}
+
+
+def test_answer_from_the_future_and_non_finite_refused():
+    core = LockstepCore(FakePlant(), axes=("linear",), mode="realtime")
+    s = core.reset()
+    assert core.offer("linear", s.stamp_ns + T_NS, 3.0) == "stale"
+    assert core.offer("linear", s.stamp_ns, float("nan")) == "invalid"
+    assert not core.complete
+
+
+def test_out_of_range_voltage_is_clamped_like_a_dac():
+    plant = FakePlant()
+    core = LockstepCore(plant, axes=("linear",))
+    s = core.reset()
+    core.offer("linear", s.stamp_ns, 12.0)
+    core.advance()
+    core.offer("linear", core.sample.stamp_ns, -1.0)
+    core.advance()
+    core.advance()
+    assert [u for u, _ in plant.applied] == [5.0, 10.0, 0.0]
+
+
+class RecordingSupervisor:
+    def __init__(self):
+        self.commands, self.samples = [], []
+        self.estopped = False
+
+    def command(self, axis, u, stamp_ns):
+        self.commands.append((axis, u, stamp_ns))
+
+    def check_sample(self, s):
+        self.samples.append(s.k)
+
+    def outputs(self, now_ns):
+        return {"linear": NEUTRAL_V, "rotary": NEUTRAL_V} if self.estopped else {}
+
+
+def test_supervisor_sees_every_command_and_sample_and_can_force_neutral():
+    plant = FakePlant()
+    sup = RecordingSupervisor()
+    core = LockstepCore(plant, axes=("linear",), supervisor=sup)
+    s = core.reset()
+    core.offer("linear", s.stamp_ns, 2.0)
+    s = core.advance()
+    sup.estopped = True
+    core.offer("linear", s.stamp_ns, 3.0)
+    core.advance()
+    core.advance()
+    assert sup.commands == [("linear", 2.0, 0), ("linear", 3.0, T_NS)]
+    assert sup.samples == [0, 1, 2, 3]
+    assert plant.applied == [(5.0, 5.0), (2.0, 5.0), (5.0, 5.0)]
+
+
+def test_bad_mode_and_axes_refused():
+    with pytest.raises(ParamError, match="mode"):
+        LockstepCore(FakePlant(), mode="fast")
+    with pytest.raises(ParamError, match="axes"):
+        LockstepCore(FakePlant(), axes=("vertical",))
+    with pytest.raises(RuntimeError):
+        LockstepCore(FakePlant()).advance()
+    assert active_axes("both") == ("linear", "rotary")
+    assert active_axes("none") == ()
+    with pytest.raises(ParamError, match="axes"):
+        active_axes("all")
+
+
+def test_sim_node_params_validate():
+    p = validate(SimNodeParams())
+    assert p.mode == "lockstep" and p.lockstep.timeout_s > 0
+    p = from_dict(SimNodeParams, {"mode": "realtime", "lockstep": {"timeout_s": 0.5}}, strict=False)
+    assert p.lockstep.timeout_s == 0.5
+    with pytest.raises(ParamError, match="mode"):
+        from_dict(SimNodeParams, {"mode": "turbo"}, strict=False)
