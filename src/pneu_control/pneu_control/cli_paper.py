@@ -1,0 +1,92 @@
+"""``pneu paper``: every experiment of the paper on the twin, table and figures."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from . import paper, session
+from .experiments import PAPER_EXPERIMENTS, Experiment
+from .plots import Series, plot_runs
+
+NAME = "paper"
+HELP = (
+    "reproduce the paper's experiments on the twin: results table beside the paper's, figures, bags"
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
+    p.add_argument("--controllers", default=None, metavar="FILE", help="controllers.yaml")
+    p.add_argument("--no-plots", action="store_true")
+
+
+def _series(result, exp: Experiment, label: str, m) -> Series:
+    from .runner import _MEASURED
+
+    cols = result.axes[exp.axis]
+    return Series(
+        label=label,
+        axis=exp.axis,
+        t=result.t,
+        reference=cols["reference"],
+        measured=result.samples[_MEASURED[exp.axis]],
+        u=cols["u"],
+        window_s=(m.window_start_s, m.window_end_s),
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from pneu_sim.params import load_plant
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    plant = load_plant(args.plant)
+    results: dict[tuple[str, str], object] = {}
+
+    def runner(exp: Experiment, controller: str, run_dir: Path):
+        spec = session.build_spec(
+            axes=(exp.axis,),
+            controller=controller,
+            reference=dict(exp.reference),
+            duration_s=exp.duration_s,
+            seed=args.seed,
+            controllers_file=args.controllers,
+            plant=plant,
+            name=f"{exp.id}/{controller}",
+        )
+        spec = _with_window(spec, exp)
+        result = session.execute(spec, run_dir, bag=True)
+        m = session.metrics_from_bag(run_dir / "run.mcap", exp.axis)
+        results[(exp.id, controller)] = (result, m)
+        return result, m
+
+    t0 = time.perf_counter()
+    print(f"pneu paper: {len(PAPER_EXPERIMENTS)} experiments on the twin (seed {args.seed})")
+    rows = paper.run_paper(out, seed=args.seed, runner=runner)
+    paper.write_table(rows, out, extra={"seed": args.seed})
+    if not args.no_plots:
+        for exp in PAPER_EXPERIMENTS:
+            series = [
+                _series(results[(exp.id, c)][0], exp, c, results[(exp.id, c)][1])
+                for c in paper.controllers_for(exp)
+            ]
+            plot_runs(series, exp.title, out / f"{exp.id}.png")
+    print()
+    print(paper.render_markdown(rows))
+    print(
+        f"wrote {out}/paper_table.json, paper_table.md, figures and one bag per run "
+        f"in {time.perf_counter() - t0:.1f} s",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def _with_window(spec, exp: Experiment):
+    from dataclasses import replace
+
+    return replace(spec, windows={exp.axis: exp.window})

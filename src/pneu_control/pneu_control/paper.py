@@ -1,0 +1,158 @@
+"""Reproduce the paper's results table on the twin (DESIGN §8).
+
+Each experiment runs for every controller the paper reports (plus ours),
+writes one directory per run (metrics.json, timeseries.npz, run.mcap), and
+the table is built from the runs' metrics beside the paper's figures.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .experiments import PAPER_EXPERIMENTS, Experiment
+from .metrics import AxisMetrics
+from .runner import RunResult
+
+__all__ = ["IMPROVED", "PaperRow", "paper_rows", "render_markdown", "run_paper"]
+
+# our controller beyond the paper, run on the experiments it is compared on
+IMPROVED: dict[str, tuple[str, ...]] = {}
+
+
+@dataclass(frozen=True)
+class PaperRow:
+    id: str
+    axis: str
+    controller: str
+    e_max: float
+    rmse: float
+    unit: str
+    paper_e_max: float | None
+    paper_rmse: float | None
+    window_s: list[float]
+    run_dir: str
+    in_band: bool | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dict(self.__dict__)
+        d["ratio_e_max"] = _ratio(self.e_max, self.paper_e_max)
+        d["ratio_rmse"] = _ratio(self.rmse, self.paper_rmse)
+        return d
+
+
+def _ratio(ours: float, paper: float | None) -> float | None:
+    if paper is None or not math.isfinite(ours):
+        return None
+    return ours / paper
+
+
+def run_dir_name(exp: Experiment, controller: str) -> str:
+    return f"{exp.id}__{controller}"
+
+
+def controllers_for(exp: Experiment) -> tuple[str, ...]:
+    return exp.controllers + IMPROVED.get(exp.id, ())
+
+
+def row_from_metrics(exp: Experiment, controller: str, m: AxisMetrics, run_dir: str, band_ok=None):
+    paper = exp.paper.get(controller, (None, None))
+    return PaperRow(
+        id=exp.id,
+        axis=exp.axis,
+        controller=controller,
+        e_max=m.e_max,
+        rmse=m.rmse,
+        unit=m.unit,
+        paper_e_max=paper[0],
+        paper_rmse=paper[1],
+        window_s=m.window_s,
+        run_dir=run_dir,
+        in_band=band_ok,
+    )
+
+
+def run_paper(
+    out_dir: str | Path,
+    *,
+    seed: int = 0,
+    runner: Callable[[Experiment, str, Path], tuple[RunResult, AxisMetrics]],
+    log: Callable[[str], None] = print,
+) -> list[PaperRow]:
+    """Run every experiment × controller with ``runner`` and collect rows."""
+    out = Path(out_dir)
+    rows: list[PaperRow] = []
+    for exp in PAPER_EXPERIMENTS:
+        for controller in controllers_for(exp):
+            run_dir = out / run_dir_name(exp, controller)
+            result, m = runner(exp, controller, run_dir)
+            band_ok = None
+            if exp.band is not None:
+                band_ok = _in_band(result, exp, m)
+            row = row_from_metrics(exp, controller, m, run_dir.name, band_ok)
+            rows.append(row)
+            log(
+                f"  {exp.id:18s} {controller:14s} e_max {m.e_max:8.4f} {m.unit:3s} "
+                f"RMSE {m.rmse:8.4f} {m.unit:3s} ({result.rtf:.0f}x real time)"
+            )
+    return rows
+
+
+def _in_band(result: RunResult, exp: Experiment, m: AxisMetrics) -> bool:
+    """Does the (averaged) measured speed stay inside the paper's band in the window?"""
+    import numpy as np
+
+    from .metrics import moving_average
+    from .runner import _MEASURED
+
+    y = result.samples[_MEASURED[exp.axis]]
+    n_avg = max(1, int(round(exp.window.average_s / float(result.t[1] - result.t[0]))))
+    y = moving_average(y, n_avg) * (60.0 / (2.0 * math.pi))
+    mask = (result.t >= m.window_start_s) & (result.t <= m.window_end_s)
+    lo, hi = exp.band  # type: ignore[misc]
+    return bool(np.all((y[mask] >= lo) & (y[mask] <= hi)))
+
+
+def _fmt(x: float | None, digits: int = 3) -> str:
+    if x is None:
+        return "—"
+    if not math.isfinite(x):
+        return "nan"
+    return f"{x:.{digits}f}"
+
+
+def render_markdown(rows: list[PaperRow]) -> str:
+    lines = [
+        "| experiment | controller | e_max | paper e_max | ratio | RMSE | paper RMSE | ratio | window (s) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        d = r.to_dict()
+        band = ""
+        if r.in_band is not None:
+            band = " (in 696–702 band)" if r.in_band else " (leaves 696–702 band)"
+        lines.append(
+            f"| {r.id} | {r.controller} | {_fmt(r.e_max)} {r.unit}{band} | {_fmt(r.paper_e_max)} | "
+            f"{_fmt(d['ratio_e_max'], 2)} | {_fmt(r.rmse)} {r.unit} | {_fmt(r.paper_rmse)} | "
+            f"{_fmt(d['ratio_rmse'], 2)} | {r.window_s[0]:.2f}–{r.window_s[1]:.2f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def write_table(
+    rows: list[PaperRow], out_dir: str | Path, extra: dict[str, Any] | None = None
+) -> None:
+    out = Path(out_dir)
+    doc = {"experiments": [r.to_dict() for r in rows]}
+    if extra:
+        doc.update(extra)
+    (out / "paper_table.json").write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
+    (out / "paper_table.md").write_text(render_markdown(rows))
+
+
+def paper_rows(path: str | Path) -> list[dict[str, Any]]:
+    return json.loads(Path(path).read_text())["experiments"]
