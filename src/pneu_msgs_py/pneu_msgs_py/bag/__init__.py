@@ -1,0 +1,28 @@
+"""MCAP bags of pneu runs: writer, reader, schemas, bulk CDR, errors, benchmarks."""
+
+from .errors import (
+    BagError,
+    BagWriteError,
+    EmptyBagError,
+    MissingTopicError,
+    NotMcapError,
+    NotRos2Error,
+    TruncatedBagError,
+    TruncatedBagWarning,
+    UnknownSchemaError,
+)
+from .writer import BagWriter, DiagStatus
+
+__all__ = [
+    "BagWriter",
+    "DiagStatus",
+    "BagError",
+    "BagWriteError",
+    "NotMcapError",
+    "NotRos2Error",
+    "TruncatedBagError",
+    "TruncatedBagWarning",
+    "MissingTopicError",
+    "UnknownSchemaError",
+    "EmptyBagError",
+]
