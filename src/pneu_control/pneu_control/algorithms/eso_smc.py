@@ -1,0 +1,169 @@
+"""ESO-based sliding mode control (paper §4, Eq. 18, 23–31), derived afresh (errata).
+
+Model (Eq. 25 with the total disturbance estimated by the ESO)::
+
+    ÿ = f + f_k + b0 u,     z3 ≈ f        (f_k: known part, rotary friction only)
+
+Error and surface (e = reference − measured, with the TD's v1, v2, v3 = ẍ_r)::
+
+    e = v1 − z1,  ė = v2 − z2,  s = ė + 2 λ e + λ² ∫e dt            (Eq. 26 fixed)
+    ṡ = ë + 2λ ė + λ² e = v3 − (f + f_k + b0 u) + 2λ ė + λ² e
+
+Imposing the reaching law ṡ = −ε sat(s) (Eq. 28) gives the control law::
+
+    u = (ε sat(s) + v3 + 2λ ė + λ² e − z3 − f_k) / b0               (Eq. 30/31 fixed)
+
+z3 is the whole unknown disturbance: f(x) is not subtracted again (errata
+Eq. 30). On s = 0: ë + 2λė + λ²e = −ṡ = 0 → E(p)/S(p) = p/(p + λ)², a double
+pole at −λ; with ṡ = 0 the error decays as (1 + λt) e^{−λt}.
+
+sat (Eq. 29): sign(s) for |s| > Δ, k s inside. Continuous only for k = 1/Δ;
+the paper's k = 0.5, Δ = 0.1 is accepted (discontinuous) as printed. The
+discrete boundary layer s(k+1) = s(k) − T ε k s(k−1) needs T ε k < 1
+(checked by :class:`~pneu_control.ctrl_params.AxisControllerParams`).
+
+∫e uses the rectangle rule; with ``integral_anti_windup`` the step is undone
+while the command is saturated in the direction e pushes.
+
+Rotary friction compensation (Eq. 31 with Eq. 9, errata: M_f/J_m). Our rotary
+model is the speed loop (y = ω in rpm, ẏ = ω̇, ÿ = f + b0 u): Eq. 7 puts
+−M_f/J_m into ω̇, so its effect in ÿ is −(dM_f/dω) ω̇ / J_m. With
+M_f = M_c tanh(ω/ω_s) + M_v ω (Eq. 9, sign smoothed over ω_s)::
+
+    f_k = −(κ / J_m) (M_v + M_c sech²(z1/ω_s) / ω_s) z2    κ = 60/(2π) rpm per rad/s
+
+(M_v in N·m/rpm, z2 in rpm/s, f_k in rpm/s²). The Coulomb level M_c itself
+has no effect at a constant speed sign; only its reversal does, smoothed.
+f_k enters the ESO's z2 channel and the law, so it is never double counted.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pneu_msgs_py.units import RPM_PER_RAD_S
+
+from ..ctrl_params import AxisControllerParams
+from ..eso import eso_gains
+
+__all__ = ["EsoSmc", "friction_gain_max"]
+
+
+def friction_gain_max(M_c: float, M_v: float, J_m: float, omega_s: float) -> float:
+    """Largest damping gain c (1/s) of f_k = −c z2 (at zero speed)."""
+    return RPM_PER_RAD_S / J_m * (M_v + M_c / omega_s)
+
+
+class EsoSmc:
+    name = "eso_smc"
+    uses_td = True
+
+    def __init__(self, params: AxisControllerParams, axis: str):
+        p = params.eso_smc
+        T = params.sample_time_s
+        self.T = T
+        self.T2h = 0.5 * T * T
+        lam = p.lambda_r
+        self.c1 = 2.0 * lam  # coefficient of e in s (Eq. 26 fixed)
+        self.c2 = lam * lam  # coefficient of ∫e
+        self.b0 = p.b_0
+        self.eps = p.epsilon
+        self.delta = p.delta
+        self.k = p.k
+        self.aw = p.integral_anti_windup
+        self.l1, self.l2, self.l3 = eso_gains(p.omega_0, T)
+        self.fric = bool(p.friction_compensation) and axis == "rotary"
+        self.fv = RPM_PER_RAD_S * p.M_v / p.J_m  # 1/s
+        self.fc = RPM_PER_RAD_S * p.M_c / (p.J_m * p.coulomb_smoothing)  # 1/s
+        self.inv_ws = 1.0 / p.coulomb_smoothing
+        lim = params.limits
+        self.lo = lim.u_min - lim.u_neutral
+        self.hi = lim.u_max - lim.u_neutral
+        self.z1 = self.z2 = self.z3 = 0.0
+        self.s = 0.0
+        self.integral = 0.0
+        self.u_raw = 0.0
+        self.f_k = 0.0
+
+    @property
+    def y_dot_est(self) -> float:
+        return self.z2
+
+    def friction_term(self, z1: float, z2: float) -> float:
+        """f_k (rpm/s²) of the rotary friction model; 0 when off."""
+        if not self.fric:
+            return 0.0
+        x = abs(z1) * self.inv_ws
+        sech2 = 0.0 if x > 30.0 else 1.0 / (math.cosh(x) ** 2)
+        return -(self.fv + self.fc * sech2) * z2
+
+    def _sat(self, s: float) -> float:
+        d = self.delta
+        if s > d:
+            return 1.0
+        if s < -d:
+            return -1.0
+        return self.k * s
+
+    def start(self, y, r, r_dot, r_ddot, u_prev, y_dot_hint):
+        self.z1 = y
+        self.z2 = z2 = y_dot_hint if math.isfinite(y_dot_hint) else 0.0
+        self.integral = 0.0
+        e = r - y
+        ed = r_dot - z2
+        s = ed + self.c1 * e
+        self.s = s
+        f_k = self.friction_term(y, z2)
+        self.f_k = f_k
+        nominal = self.eps * self._sat(s) + r_ddot + self.c1 * ed + self.c2 * e - f_k
+        # cold start: z3 = 0; switch: z3 such that u = u_prev (bumpless)
+        self.z3 = 0.0 if u_prev is None else nominal - self.b0 * u_prev
+        u = (nominal - self.z3) / self.b0
+        self.u_raw = u
+        return self.hi if u > self.hi else (self.lo if u < self.lo else u)
+
+    def update(self, y, r, r_dot, r_ddot, u_applied):
+        T = self.T
+        # ESO, Eq. 18 discretised (pneu_control.eso.LinearEso.update), f_k held
+        z2, z3 = self.z2, self.z3
+        acc = z3 + self.b0 * u_applied + self.f_k
+        z1p = self.z1 + T * z2 + self.T2h * acc
+        z2p = z2 + T * acc
+        ey = y - z1p
+        z1 = z1p + self.l1 * ey
+        z2 = z2p + self.l2 * ey
+        z3 = z3 + self.l3 * ey
+        self.z1, self.z2, self.z3 = z1, z2, z3
+        # sliding surface, Eq. 26 (fixed: double pole at −λ)
+        e = r - z1
+        ed = r_dot - z2
+        integral = self.integral + T * e
+        c1, c2 = self.c1, self.c2
+        s = ed + c1 * e + c2 * integral
+        self.s = s
+        d = self.delta
+        if s > d:  # Eq. 29
+            sat = 1.0
+        elif s < -d:
+            sat = -1.0
+        else:
+            sat = self.k * s
+        if self.fric:
+            f_k = self.friction_term(z1, z2)
+            self.f_k = f_k
+        else:
+            f_k = 0.0
+        # Eq. 30/31 (fixed): ṡ = −ε sat(s)
+        u = (self.eps * sat + r_ddot + c1 * ed + c2 * e - z3 - f_k) / self.b0
+        self.u_raw = u
+        hi, lo = self.hi, self.lo
+        if u > hi:
+            if not (self.aw and e > 0.0):
+                self.integral = integral
+            return hi
+        if u < lo:
+            if not (self.aw and e < 0.0):
+                self.integral = integral
+            return lo
+        self.integral = integral
+        return u

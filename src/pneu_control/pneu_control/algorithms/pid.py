@@ -1,0 +1,104 @@
+"""PID with a filtered derivative and anti-windup (paper gains, Results section).
+
+Discrete law at sample k (T = sample time, e = r − y_f)::
+
+    y_f(k)  = y_f(k−1) + a_y (y(k) − y_f(k−1))       measurement low-pass, a_y = 1 − exp(−T/T_y)
+    D_in(k) = ṙ(k) − (y_f(k) − y_f(k−1))/T            derivative_on = error (analytic ṙ, no kick)
+            = −(y_f(k) − y_f(k−1))/T                  derivative_on = measurement
+    d(k)    = a d(k−1) + (1 − a) D_in(k),  a = exp(−T/T_f)   (exact ZOH of 1/(T_f s + 1))
+    I(k)    = I(k−1) + Ki e(k) T                      (Ki inside the sum: gain changes never jump)
+    u       = Kp e + I + Kd d,  saturated to [u_min, u_max] − u_n
+
+Anti-windup: ``conditional`` undoes the integration step when the output is
+saturated and e pushes further into saturation, and keeps I within the output
+range; ``back_calculation`` adds (T/T_t)(u_sat − u_raw) to I; ``none``.
+Units: e in mm (linear) or rpm (rotary); gains V/mm, V/(mm·s), V·s/mm or per rpm.
+The rotary speed is quantised (15 rpm at 1000 P/R X4, 1 ms): with Kd = 0.004
+V·s/rpm an unfiltered derivative would swing ±60 V per count, hence T_f.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..ctrl_params import AxisControllerParams
+from .base import NAN
+
+__all__ = ["Pid"]
+
+
+class Pid:
+    name = "pid"
+    uses_td = False
+
+    def __init__(self, params: AxisControllerParams, axis: str):
+        p = params.pid
+        T = params.sample_time_s
+        self.T = T
+        self.kp, self.ki, self.kd = p.kp, p.ki, p.kd
+        self.a_d = math.exp(-T / p.tf)
+        self.a_y = 1.0 - math.exp(-T / p.y_filter_tf) if p.y_filter_tf > 0.0 else 1.0
+        self.on_error = p.derivative_on == "error"
+        self.aw = p.anti_windup
+        self.kb = T / p.tt
+        lim = params.limits
+        self.lo = lim.u_min - lim.u_neutral
+        self.hi = lim.u_max - lim.u_neutral
+        self.z1 = self.z2 = self.z3 = self.s = NAN
+        self.u_raw = 0.0
+        self.integral = 0.0
+        self.d = 0.0
+        self.y_f = 0.0
+        self.r_dot = 0.0
+
+    @property
+    def y_dot_est(self) -> float:
+        return self.r_dot - self.d if self.on_error else -self.d
+
+    def start(self, y, r, r_dot, r_ddot, u_prev, y_dot_hint):
+        self.y_f = y
+        self.r_dot = r_dot
+        yd = y_dot_hint if math.isfinite(y_dot_hint) else 0.0
+        self.d = (r_dot - yd) if self.on_error else -yd
+        e = r - y
+        if u_prev is None:
+            self.integral = 0.0
+        else:  # bumpless: choose I so that the output equals u_prev
+            i = u_prev - self.kp * e - self.kd * self.d
+            self.integral = min(max(i, self.lo), self.hi)
+        u = self.kp * e + self.integral + self.kd * self.d
+        self.u_raw = u
+        return self.hi if u > self.hi else (self.lo if u < self.lo else u)
+
+    def update(self, y, r, r_dot, r_ddot, u_applied):
+        T = self.T
+        y_prev = self.y_f
+        y_f = y_prev + self.a_y * (y - y_prev)
+        self.y_f = y_f
+        self.r_dot = r_dot
+        dy = (y_f - y_prev) / T
+        d_in = r_dot - dy if self.on_error else -dy
+        a = self.a_d
+        d = a * self.d + (1.0 - a) * d_in
+        self.d = d
+        e = r - y_f
+        di = self.ki * e * T
+        integral = self.integral + di
+        u = self.kp * e + integral + self.kd * d
+        hi, lo = self.hi, self.lo
+        if u > hi:
+            u_sat = hi
+        elif u < lo:
+            u_sat = lo
+        else:
+            u_sat = u
+        aw = self.aw
+        if aw == "conditional":
+            if (u > hi and di > 0.0) or (u < lo and di < 0.0):
+                integral -= di  # conditional integration
+            integral = hi if integral > hi else (lo if integral < lo else integral)
+        elif aw == "back_calculation":
+            integral += self.kb * (u_sat - u)
+        self.integral = integral
+        self.u_raw = u
+        return u_sat

@@ -1,0 +1,280 @@
+"""One axis controller: reference + (TD) + algorithm + output limits + bumpless switching.
+
+:class:`AxisController` is the core behind both controller nodes and the
+in-process runner. Per :class:`~pneu_msgs_py.samples.SensorSample` it
+
+1. takes the measurement (``sample.x`` in m for the linear axis, ``sample.omega``
+   in rad/s for the rotary axis -- raw, quantised; any filtering belongs to the
+   algorithm) and converts it to the paper's units (mm, rpm);
+2. evaluates the reference at t = (stamp_ns − first stamp_ns)·1e-9 s;
+3. runs the tracking differentiator (Eq. 23–24) when the algorithm uses it
+   (initialised at the measurement: a soft start), else uses the analytic
+   (r, ṙ, r̈);
+4. calls the algorithm, which returns the saturated deviation from the
+   neutral voltage, and returns neutral + deviation (V, within [u_min, u_max]).
+
+``set_params`` validates the whole new set (including the reference and its
+waypoint file) before anything changes; the new set takes effect at the next
+``update``. Every change, including an algorithm switch, is bumpless: the new
+algorithm starts from the measurement, the old algorithm's velocity estimate
+and the last command, and its first command equals the last one.
+
+The ESO is fed the command that was actually on the valve during the last
+sample period: with ``transport_delay_samples = d`` (DESIGN §3: 1) that is the
+command computed d + 1 samples ago.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pneu_msgs_py.params import ParamError, validate
+from pneu_msgs_py.samples import SensorSample
+
+from .algorithms import make_algorithm
+from .ctrl_params import AxisControllerParams
+from .references import axis_scale, make_reference
+from .td import TrackingDifferentiator
+
+__all__ = ["AxisController", "ControllerState", "STATE_FIELDS"]
+
+_NAN = float("nan")
+
+
+@dataclass(slots=True)
+class ControllerState:
+    """What the controller did at its last update (SI; NaN where not defined).
+
+    Linear: m, m/s, m/s². Rotary (speed loop): rad/s, rad/s², rad/s³.
+    ``reference``/``reference_dot`` are the reference as given (not the TD
+    output); ``error`` = reference − measured (DESIGN §7); ``z1, z2, z3`` the
+    observer's output, its derivative and the total disturbance; ``s`` the
+    sliding variable (units of ė: m/s or rad/s²); ``u_raw``/``u_sat`` the
+    unsaturated and the applied valve command in V (absolute, 5 V neutral).
+    """
+
+    t: float = 0.0
+    reference: float = _NAN
+    reference_dot: float = _NAN
+    measured: float = _NAN
+    error: float = _NAN
+    z1: float = _NAN
+    z2: float = _NAN
+    z3: float = _NAN
+    s: float = _NAN
+    u_raw: float = _NAN
+    u_sat: float = _NAN
+    algorithm: str = ""
+
+
+STATE_FIELDS: tuple[str, ...] = (
+    "t",
+    "reference",
+    "reference_dot",
+    "measured",
+    "error",
+    "z1",
+    "z2",
+    "z3",
+    "s",
+    "u_raw",
+    "u_sat",
+)
+
+
+class AxisController:
+    """Controller core of one axis (``"linear"`` or ``"rotary"``); see module docstring."""
+
+    def __init__(self, axis: str, params: AxisControllerParams):
+        if axis not in ("linear", "rotary"):
+            raise ParamError("axis", axis, "one of linear, rotary")
+        self.axis = axis
+        self._scale = axis_scale(axis)
+        self._linear = axis == "linear"
+        built = self._build(params)
+        self._commit(built)
+        self._pending = None
+        self._state = ControllerState()
+        self.reset()
+
+    # -- parameters ---------------------------------------------------------
+    def _build(self, params: AxisControllerParams):
+        """Validate ``params`` completely and build every object; nothing is applied."""
+        if not isinstance(params, AxisControllerParams):
+            raise ParamError("params", type(params).__name__, "an AxisControllerParams")
+        validate(params)
+        if self._linear and params.eso_smc.friction_compensation:
+            raise ParamError(
+                "eso_smc.friction_compensation", True, "false on the linear axis (Eq. 31 is rotary)"
+            )
+        ref = make_reference(params.reference, self.axis, sample_time_s=params.sample_time_s)
+        alg = make_algorithm(params, self.axis)
+        return params, ref, alg
+
+    def _commit(self, built) -> None:
+        params, ref, alg = built
+        self._params = params
+        self._ref = ref
+        self._alg = alg
+        self._use_td = alg.uses_td and params.td.enabled
+        self._neutral = params.limits.u_neutral
+        self._delay = params.transport_delay_samples
+
+    @property
+    def params(self) -> AxisControllerParams:
+        return self._params
+
+    @property
+    def algorithm(self) -> str:
+        return self._alg.name
+
+    def set_params(self, params: AxisControllerParams) -> None:
+        """Validate the whole set now (ParamError, old set kept); apply at the next update."""
+        old = self._params
+        if params.sample_time_s != old.sample_time_s:
+            raise ParamError(
+                "sample_time_s",
+                params.sample_time_s,
+                f"read-only at run time ({old.sample_time_s:g} s)",
+            )
+        if params.transport_delay_samples != old.transport_delay_samples:
+            raise ParamError(
+                "transport_delay_samples",
+                params.transport_delay_samples,
+                f"read-only at run time ({old.transport_delay_samples})",
+            )
+        self._pending = self._build(params)
+
+    def reset(self) -> None:
+        """Forget all dynamic state; the next update is a cold start (t = 0 at its stamp)."""
+        if self._pending is not None:
+            self._commit(self._pending)
+            self._pending = None
+        p = self._params
+        self._alg = make_algorithm(p, self.axis)
+        self._td = TrackingDifferentiator(p.td.r, p.td.h, p.sample_time_s)
+        self._t0_ns: int | None = None
+        self._started = False
+        self._u_hist = [self._neutral] * (self._delay + 1)  # V, oldest first
+        self._u_last = self._neutral
+        self._t = 0.0
+        self._r = self._rd = self._y = _NAN
+        self._dirty = True
+        self.n_nonfinite = 0
+
+    # -- the cycle ----------------------------------------------------------
+    def update(self, sample: SensorSample) -> float:
+        """One control cycle; returns the saturated valve voltage (V)."""
+        stamp = sample.stamp_ns
+        if self._t0_ns is None:
+            self._t0_ns = stamp
+        t = (stamp - self._t0_ns) * 1e-9
+        y_si = sample.x if self._linear else sample.omega
+        r, rd, rdd = self._ref(t)
+        self._t, self._r, self._rd, self._y = t, r, rd, y_si
+        self._dirty = True
+        if not (y_si == y_si and -1e300 < y_si < 1e300):  # NaN/inf: hold, count
+            self.n_nonfinite += 1
+            return self._u_last
+        k = self._scale
+        y = y_si * k
+        if self._pending is not None:
+            return self._switch(y, r * k, rd * k, rdd * k)
+        if not self._started:
+            return self._cold_start(y, r * k, rd * k, rdd * k)
+        if self._use_td:
+            td = self._td
+            td.step(r * k)
+            v1, v2, v3 = td.v1, td.v2, td.v3
+        else:
+            v1, v2, v3 = r * k, rd * k, rdd * k
+        hist = self._u_hist
+        neutral = self._neutral
+        u = self._alg.update(y, v1, v2, v3, hist[0] - neutral) + neutral
+        del hist[0]
+        hist.append(u)
+        self._u_last = u
+        return u
+
+    def _finish(self, u_dev: float) -> float:
+        u = u_dev + self._neutral
+        hist = self._u_hist
+        del hist[0]
+        hist.append(u)
+        self._u_last = u
+        return u
+
+    def _cold_start(self, y, r, rd, rdd) -> float:
+        if self._use_td:
+            self._td.reset(y, 0.0)  # soft start from the measurement
+            self._td.step(r)
+            v1, v2, v3 = self._td.v1, self._td.v2, self._td.v3
+        else:
+            v1, v2, v3 = r, rd, rdd
+        self._started = True
+        return self._finish(self._alg.start(y, v1, v2, v3, None, 0.0))
+
+    def _switch(self, y, r, rd, rdd) -> float:
+        """Apply the pending set bumplessly (see module docstring)."""
+        old_alg, old_use_td = self._alg, self._use_td
+        hint = old_alg.y_dot_est if self._started else 0.0
+        params, ref, new_alg = self._pending  # new_alg: a fresh instance, no shared state
+        self._pending = None
+        self._commit((params, ref, new_alg))
+        # the reference may have changed: re-evaluate at this sample's time
+        k = self._scale
+        r_si, rd_si, rdd_si = ref(self._t)
+        self._r, self._rd = r_si, rd_si
+        r, rd, rdd = r_si * k, rd_si * k, rdd_si * k
+        td = self._td
+        td.r, td.h = params.td.r, params.td.h
+        if self._use_td:
+            if not (old_use_td and self._started):
+                td.reset(r, rd)  # continue from the reference the old algorithm tracked
+            td.step(r)
+            v1, v2, v3 = td.v1, td.v2, td.v3
+        else:
+            v1, v2, v3 = r, rd, rdd
+        u_prev = (self._u_last - self._neutral) if self._started else None
+        self._started = True
+        return self._finish(new_alg.start(y, v1, v2, v3, u_prev, hint))
+
+    # -- what it did --------------------------------------------------------
+    @property
+    def state(self) -> ControllerState:
+        """The last update's :class:`ControllerState` (refreshed in place; copy to keep)."""
+        st = self._state
+        if self._dirty:
+            k = self._scale
+            a = self._alg
+            st.t = self._t
+            st.reference = self._r
+            st.reference_dot = self._rd
+            st.measured = self._y
+            st.error = self._r - self._y
+            st.z1 = a.z1 / k
+            st.z2 = a.z2 / k
+            st.z3 = a.z3 / k
+            st.s = a.s / k
+            st.u_raw = a.u_raw + self._neutral
+            st.u_sat = self._u_last
+            st.algorithm = a.name
+            self._dirty = False
+        return st
+
+    def state_values(self) -> tuple[float, ...]:
+        """The float fields of :attr:`state` in :data:`STATE_FIELDS` order."""
+        st = self.state
+        return (
+            st.t,
+            st.reference,
+            st.reference_dot,
+            st.measured,
+            st.error,
+            st.z1,
+            st.z2,
+            st.z3,
+            st.s,
+            st.u_raw,
+            st.u_sat,
+        )
