@@ -403,13 +403,15 @@ class RotaryParams:
         source="estimated (" + _PLANT_SHEET + ")",
     )
     L_m: float = param(
-        0.025,
+        0.021,
         unit="m",
         lo=0.0,
         lo_open=True,
         hi=0.5,
         desc="vane length (Eq. 8)",
-        source="estimated (" + _PLANT_SHEET + ")",
+        source="estimated: sets the sector-mean Eq. 8 factor K = 1.87e-6 m^3 so that K * 100 psi = 1.29 N*m"
+        " = 4 P_max / omega_free, the stall torque of a linear torque-speed line through Gast 1AM's"
+        " 0.45 hp and 10 000 rpm at 100 psi (the sheet's 25 mm ignores the 2 d R cos term of Eq. 8)",
     )
     n_vanes: int = param(
         4,
@@ -471,13 +473,13 @@ class RotaryParams:
         source="estimated: exhaust-side cells and port of a 1AM-size motor",
     )
     A_ex: float = param(
-        1.0e-5,
+        1.5e-5,
         unit="m^2",
         lo=0.0,
         lo_open=True,
         hi=1e-3,
         desc="silencer orifice area (ISO 6358 with Eq. 12 C_d, b as valve)",
-        source="estimated: 1/8 NPT exhaust (≈ 28 mm^2) throttled by a sintered silencer to ≈ 1/3",
+        source="estimated: 1/8 NPT exhaust port (≈ 7 mm bore, 38 mm^2) throttled by a sintered silencer to ≈ 40 %",
     )
     k_leak: float = param(
         5e-10,
@@ -485,7 +487,7 @@ class RotaryParams:
         lo=0.0,
         hi=1e-6,
         desc="vane/side leakage inlet -> exhaust, laminar",
-        source="estimated: 5e-5 kg/s (≈ 2.5 l/min ANR) at 1 bar, ≈ 10 % of the 800 rpm consumption",
+        source="estimated: 5e-5 kg/s (≈ 2.5 l/min ANR) at 1 bar, ≈ 15 % of the 800 rpm consumption",
     )
 
     def _check(self) -> None:
@@ -724,6 +726,15 @@ def _strip(cls: type, tree: Any, prefix: str) -> dict[str, Any]:
         if not isinstance(src, str) or not src.strip():
             raise PlantConfigError(f"{name}.source", src, "a non-empty string naming the source")
         out[key] = node["value"]
+    for key, f in fields.items():
+        if key not in out:
+            tp = hints[key]
+            if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+                need = "required: the parameter group " + ", ".join(_leaf_meta(tp))
+            else:
+                unit = f.metadata.get("unit", "")
+                need = f"required: a leaf {{value, unit: '{unit}', source}}"
+            raise PlantConfigError(f"{prefix}{key}", None, need)
     return out
 
 
