@@ -1,0 +1,358 @@
+"""The safety supervisor: every rule, at and just beyond its threshold; e-stop and reset."""
+
+import dataclasses
+import math
+from pathlib import Path
+
+import pytest
+from pneu_driver.safety import (
+    ERROR,
+    OK,
+    WARN,
+    SafetyParams,
+    SafetySupervisor,
+    load_safety_params,
+)
+from pneu_msgs_py.params import ParamError, from_dict
+from pneu_msgs_py.samples import SensorSample
+
+CONFIG = Path(__file__).resolve().parents[2] / "config"
+T_NS = 1_000_000
+LIVE_VOLTS = (2.0, 1.5, 3.0, 2.5)
+
+
+class Rig:
+    """Feeds a supervisor plausible samples at 1 kHz; fields can be overridden per tick."""
+
+    def __init__(self, params: SafetyParams | None = None, **over):
+        self.sup = SafetySupervisor(params or SafetyParams(), sample_time_s=1e-3)
+        self.k = -1
+        self.counts = 0
+        self.rate = over.pop("rate", 0)  # counts per tick
+        self.x = 0.0
+
+    def tick(self, raw_volts=None, u=(7.0, 6.0), command=True, **fields):
+        self.k += 1
+        stamp = self.k * T_NS
+        self.counts += fields.pop("dcounts", self.rate)
+        wiggle = 10.0 * (self.k % 3)  # live sensors never repeat bit-exactly
+        values = dict(
+            k=self.k,
+            stamp_ns=stamp,
+            p_c1=250000.0 + wiggle,
+            p_c2=240000.0 - wiggle,
+            p_m1=300000.0 + wiggle,
+            x=self.x + 1e-6 * (self.k % 2),
+            theta=2 * math.pi * self.counts / 4000,
+            omega=0.0,
+            counts=self.counts,
+        )
+        values.update(fields)
+        self.sup.check_sample(SensorSample(**values), raw_volts)
+        if command:
+            self.sup.command("linear", u[0], stamp)
+            self.sup.command("rotary", u[1], stamp)
+        return self.sup.outputs(stamp + T_NS)
+
+    def run(self, n, **kw):
+        out = None
+        for _ in range(n):
+            out = self.tick(**kw)
+        return out
+
+
+def rules(events, level=None):
+    return [(e.axis, e.rule) for e in events if level is None or e.level == level]
+
+
+def test_safety_yaml_is_the_documented_default():
+    assert load_safety_params(CONFIG / "safety.yaml") == SafetyParams()
+
+
+def test_nominal_commands_pass_and_nothing_before_them():
+    r = Rig()
+    assert r.tick(command=False) == (5.0, 5.0)
+    st = r.sup.status
+    assert st["linear"].state == "SAFE" and st["linear"].causes == ("no_command",)
+    assert r.tick() == (7.0, 6.0)
+    assert r.sup.status["rotary"].state == "OK"
+    ev = r.sup.events()
+    assert rules(ev, OK) == [("linear", "command"), ("rotary", "command")]
+    assert not rules(ev, ERROR)
+
+
+def test_watchdog_exactly_at_threshold_then_latched_until_acknowledged():
+    r = Rig()
+    r.tick()
+    sup = r.sup
+    stamp = r.k * T_NS
+    sup.command("rotary", 6.0, stamp + 5 * T_NS)  # keep the rotary axis fed
+    assert sup.outputs(stamp + 5 * T_NS) == (7.0, 6.0)  # age == watchdog_ms: still fresh
+    assert sup.outputs(stamp + 5 * T_NS + 1) == (5.0, 6.0)  # 1 ns older: linear safe
+    ev = sup.events()
+    assert ("linear", "watchdog") in rules(ev, ERROR)
+    assert sup.status["linear"].causes == ("watchdog",)
+    # commands resume: still safe until acknowledged
+    sup.command("linear", 8.0, stamp + 6 * T_NS)
+    assert sup.outputs(stamp + 7 * T_NS) == (5.0, 6.0)
+    assert ("linear", "watchdog") in rules(sup.events(), WARN)
+    ok, msg = sup.acknowledge("linear")
+    assert ok and "watchdog" in msg
+    assert sup.outputs(stamp + 7 * T_NS) == (8.0, 6.0)
+
+
+def test_watchdog_acknowledged_without_commands_waits_for_them():
+    r = Rig()
+    r.tick()
+    sup = r.sup
+    assert sup.outputs(r.k * T_NS + 20 * T_NS) == (5.0, 5.0)
+    ok, _ = sup.acknowledge("linear")
+    assert ok
+    assert sup.status["linear"].causes == ("no_command",)
+    assert sup.outputs(r.k * T_NS + 21 * T_NS)[0] == 5.0
+    sup.command("linear", 3.0, r.k * T_NS + 21 * T_NS)
+    assert sup.outputs(r.k * T_NS + 22 * T_NS)[0] == 3.0
+
+
+def test_soft_limit_at_rest_exactly_at_the_margin():
+    r = Rig()
+    x_lo, x_hi = r.sup.soft_limits
+    assert x_hi == pytest.approx(0.075 - 0.010)
+    # at rest exactly at the boundary: commands toward the end stop are held at 5 V
+    out = r.run(12, x=x_hi, u=(7.0, 6.0))
+    assert out == (5.0, 6.0)
+    assert r.sup.status["linear"].state == "LIMITED"
+    assert ("linear", "soft_limit") in rules(r.sup.events(), WARN)
+    assert r.tick(x=x_hi, u=(3.0, 6.0)) == (3.0, 6.0)  # retracting passes
+    # leaving needs the hysteresis
+    r2 = Rig()
+    assert r2.run(12, x=x_hi - 1e-9, u=(7.0, 6.0)) == (7.0, 6.0)
+    assert r2.sup.status["linear"].state == "OK"
+    # the lower end with the valve plumbed the other way round
+    r3 = Rig(dataclasses.replace(SafetyParams(), extend_above_neutral=False))
+    assert r3.run(12, x=x_lo, u=(7.0, 6.0)) == (5.0, 6.0)  # 7 V retracts here
+    assert r3.tick(x=x_lo, u=(2.0, 6.0)) == (2.0, 6.0)
+
+
+def test_soft_limit_counts_the_braking_distance():
+    p = SafetyParams()
+    x_hi = p.stroke_m / 2 - p.stroke_margin_m
+    v = 1.0  # m/s: braking distance v^2 / (2 * 20 m/s^2) = 25 mm
+    x_end = x_hi - 0.020  # 20 mm short of the soft limit, 5 mm less than the braking distance
+    for direction, expect in ((+1, 5.0), (-1, 7.0)):
+        r = Rig(p)
+        out = None
+        for i in range(12):
+            out = r.tick(x=x_end - direction * v * (11 - i) * 1e-3, u=(7.0, 6.0))
+        assert out[0] == expect, direction
+    # slow enough that the braking distance ends inside the limit: passes
+    r = Rig(p)
+    for i in range(12):
+        out = r.tick(x=x_end - 0.5 * (11 - i) * 1e-3, u=(7.0, 6.0))  # 0.5 m/s: 6.25 mm
+    assert out[0] == 7.0
+    # hysteresis: back away by more than stroke_hyst_m and the limit releases
+    r = Rig(p)
+    r.run(12, x=x_hi)
+    r.sup.events()
+    r.run(12, x=x_hi - 0.0015)
+    assert ("linear", "soft_limit") in rules(r.sup.events(), OK)
+    assert r.sup.status["linear"].state == "OK"
+
+
+def test_overspeed_exactly_at_max_then_above():
+    # 1500 rpm = 25 rev/s = 100 counts per ms at 4000 counts/rev
+    r = Rig(rate=100)
+    assert r.run(30) == (7.0, 6.0)
+    r = Rig(rate=101)  # 1515 rpm
+    out = r.run(30)
+    assert out == (7.0, 5.0)
+    ev = r.sup.events()
+    assert ("rotary", "overspeed") in rules(ev, ERROR)
+    assert r.sup.status["rotary"].present == ("overspeed",)
+    assert r.sup.acknowledge("rotary")[0] is False  # still too fast
+    r.rate = 90
+    r.run(30)
+    assert r.sup.acknowledge("rotary")[0] is True
+    assert r.tick() == (7.0, 6.0)
+
+
+def test_encoder_jump_boundary():
+    p = dataclasses.replace(SafetyParams(), max_accel_rad_s2=0.0)  # bound = slack (2 counts)
+    r = Rig(p, rate=20)
+    r.run(5)
+    assert r.tick(dcounts=22) == (7.0, 6.0)  # deviation 2 == slack: plausible
+    r = Rig(p, rate=20)
+    r.run(5)
+    assert r.tick(dcounts=23) == (7.0, 5.0)
+    assert ("rotary", "encoder_jump") in rules(r.sup.events(), ERROR)
+    # the default acceleration bound: a 1000-count glitch is impossible, steady counting is fine
+    sup = SafetySupervisor(SafetyParams())
+    assert sup.encoder_jump_allowance(T_NS) == pytest.approx(
+        5.0e4 * 1e-6 * 4000 / (2 * math.pi) + 2
+    )
+    r = Rig(rate=50)
+    r.run(5)
+    assert r.tick(dcounts=1050)[1] == 5.0
+
+
+def test_non_finite_values_make_only_their_axis_safe():
+    r = Rig()
+    r.tick()
+    assert r.tick(p_c1=math.nan) == (5.0, 6.0)
+    assert ("linear", "non_finite") in rules(r.sup.events(), ERROR)
+    r = Rig()
+    assert r.tick(omega=math.inf) == (7.0, 5.0)
+    r = Rig()
+    assert r.tick(raw_volts=(2.0, 1.5, math.nan, 2.5)) == (7.0, 5.0)
+
+
+def test_live_voltage_range_boundaries():
+    lo, hi = SafetyParams().pressure_live_v
+    r = Rig()
+    assert r.tick(raw_volts=(hi, lo, 3.0, 5.3)) == (7.0, 6.0)  # exactly at the bounds: live
+    assert r.tick(raw_volts=(math.nextafter(hi, 20.0), 1.5, 3.0, 2.5)) == (5.0, 6.0)
+    ev = r.sup.events()
+    [trip] = [e for e in ev if e.rule == "live_range"]
+    assert trip.axis == "linear" and trip.level == ERROR and dict(trip.values)["sensor"] == "p_c1"
+    r = Rig()
+    assert r.tick(raw_volts=(2.0, 1.5, -0.31, 2.5)) == (7.0, 5.0)  # broken wire on the motor sensor
+    r = Rig()
+    assert r.tick(raw_volts=(2.0, 1.5, 3.0, 5.31)) == (5.0, 6.0)  # laser beam lost
+
+
+def test_pressure_above_supply_plus_margin():
+    p = SafetyParams()
+    r = Rig()
+    limit_lin = p.supply_linear_pa + p.pressure_margin_pa
+    limit_rot = p.supply_rotary_pa + p.pressure_margin_pa
+    assert r.tick(p_c2=limit_lin, p_m1=limit_rot) == (7.0, 6.0)
+    assert r.tick(p_c2=limit_lin + 1.0) == (5.0, 6.0)
+    r = Rig()
+    assert r.tick(p_m1=limit_rot + 1.0) == (7.0, 5.0)
+    assert ("rotary", "over_pressure") in rules(r.sup.events(), ERROR)
+
+
+def test_position_beyond_the_end_stops_is_implausible():
+    r = Rig()
+    assert r.tick(x=-0.080, u=(3.0, 6.0))[0] == 5.0  # soft limit holds the retracting command
+    assert r.sup.status["linear"].state == "LIMITED"
+    assert r.tick(x=-0.080, u=(7.0, 6.0))[0] == 7.0  # at |x| = stroke/2 + margin: plausible
+    assert r.tick(x=-0.0801, u=(7.0, 6.0))[0] == 5.0
+    assert ("linear", "position_range") in rules(r.sup.events(), ERROR)
+
+
+def test_stuck_value_exactly_at_stuck_ms():
+    r = Rig()
+    for _ in range(251):  # p_c1 identical from t = 0 to t = 250 ms: frozen for exactly stuck_ms
+        out = r.tick(p_c1=2.5e5)
+    assert out == (7.0, 6.0)
+    assert r.tick(p_c1=2.5e5) == (5.0, 6.0)
+    assert ("linear", "stuck") in rules(r.sup.events(), ERROR)
+    ok, msg = r.sup.acknowledge("linear")
+    assert not ok and "stuck:p_c1" in msg
+    r.tick(p_c1=2.6e5)  # moves again
+    assert ("linear", "stuck") in rules(r.sup.events(), WARN)
+    assert r.sup.acknowledge("linear")[0]
+    assert r.tick(p_c1=2.7e5) == (7.0, 6.0)
+    # raw volts are watched when given: a frozen laser voltage trips the linear axis
+    r = Rig()
+    for _ in range(252):
+        out = r.tick(
+            raw_volts=(2.0 + 1e-4 * (r.k % 2), 1.5 - 1e-4 * (r.k % 2), 3.0 + 1e-4 * (r.k % 2), 2.5)
+        )
+    assert out == (5.0, 6.0)
+
+
+def test_output_sanity_never_writes_a_bad_command():
+    for bad in (math.nan, math.inf, -0.001, 10.001):
+        r = Rig()
+        assert r.tick(u=(bad, 6.0)) == (5.0, 6.0)
+        assert ("linear", "output_sanity") in rules(r.sup.events(), ERROR)
+        assert r.sup.counters["refused_commands"] == 1
+    r = Rig()
+    assert r.tick(u=(0.0, 10.0)) == (0.0, 10.0)  # the range ends are valid
+    r.tick(u=(math.nan, 6.0))
+    assert r.sup.acknowledge("linear")[0] is False  # the last command is still bad
+    assert r.tick(u=(4.0, 6.0)) == (5.0, 6.0)  # a good one: still latched
+    assert r.sup.acknowledge("linear")[0] is True
+    assert r.tick(u=(4.0, 6.0)) == (4.0, 6.0)
+
+
+def test_older_commands_are_ignored():
+    r = Rig()
+    r.tick()
+    r.sup.command("linear", 2.0, r.k * T_NS - 3 * T_NS)
+    assert r.sup.outputs(r.k * T_NS + T_NS) == (7.0, 6.0)
+    assert r.sup.counters["stale_commands"] == 1
+    with pytest.raises(ValueError, match="axis: 'z'"):
+        r.sup.command("z", 5.0, 0)
+
+
+def test_estop_latches_all_and_reset_needs_the_fault_gone():
+    r = Rig()
+    r.tick()
+    r.sup.events()
+    r.sup.estop("operator")
+    assert r.tick() == (5.0, 5.0)
+    ev = r.sup.events()
+    assert [(e.axis, e.rule, e.level) for e in ev] == [("all", "estop", ERROR)]
+    r.sup.estop("again")  # already latched: no second event, first reason kept
+    assert r.sup.estopped == "operator" and not r.sup.events()
+    # acknowledging an axis does not clear the e-stop
+    ok, msg = r.sup.acknowledge("linear")
+    assert ok and "e-stop still latched" in msg
+    # a fault present now blocks the reset
+    assert r.tick(raw_volts=(11.0, 1.5, 3.0, 2.5)) == (5.0, 5.0)
+    ok, msg = r.sup.reset()
+    assert not ok and "live_range:p_c1" in msg
+    assert r.tick() == (5.0, 5.0)  # the sensor is back, still e-stopped
+    ok, msg = r.sup.reset()
+    assert ok and "e-stop (operator)" in msg and "linear:live_range:p_c1" in msg
+    assert ("all", "reset") in rules(r.sup.events(), OK)
+    assert r.tick() == (7.0, 6.0)
+    assert r.sup.reset() == (True, "reset: nothing latched")
+
+
+def test_unsafe_parameters_refused_unless_allowed():
+    cases = {
+        "stroke_margin_m": -0.001,
+        "position_margin_m": -0.001,
+        "pressure_margin_pa": -1.0,
+        "watchdog_ms": 1000.5,
+        "max_speed_rpm": 6000.5,
+    }
+    for key, value in cases.items():
+        with pytest.raises(
+            ParamError, match=rf"^{key}: {value!r} refused; allowed: .*allow_unsafe"
+        ):
+            from_dict(SafetyParams, {key: value}, strict=False)
+        p = from_dict(SafetyParams, {key: value, "allow_unsafe": True}, strict=False)
+        assert len(p.unsafe_overrides()) == 1 and key in p.unsafe_overrides()[0]
+        ev = SafetySupervisor(p).events()
+        assert [(e.axis, e.rule, e.level) for e in ev] == [("all", "allow_unsafe", WARN)]
+    # the thresholds themselves are accepted
+    p = from_dict(
+        SafetyParams,
+        {"watchdog_ms": 1000.0, "max_speed_rpm": 6000.0, "stroke_margin_m": 0.0},
+        strict=False,
+    )
+    assert p.unsafe_overrides() == ()
+    with pytest.raises(ParamError, match=r"watchdog_ms: 0.0 refused"):
+        from_dict(SafetyParams, {"watchdog_ms": 0.0, "allow_unsafe": True}, strict=False)
+    with pytest.raises(ParamError, match=r"pressure_live_v"):
+        from_dict(SafetyParams, {"pressure_live_v": [10.0, 0.0]}, strict=False)
+    with pytest.raises(ValueError, match="sample_time_s"):
+        SafetySupervisor(SafetyParams(), sample_time_s=0.0)
+
+
+def test_events_carry_time_and_string_key_values():
+    r = Rig()
+    r.tick()
+    r.tick(p_m1=9.0e5)
+    [ev] = [e for e in r.sup.events() if e.level == ERROR]
+    assert ev.stamp_ns == r.k * T_NS
+    d = ev.as_dict()
+    assert d["axis"] == "rotary" and d["rule"] == "over_pressure"
+    assert d["values"]["sensor"] == "p_m1" and float(d["values"]["pressure_pa"]) == 9.0e5
+    assert all(isinstance(v, str) for _, v in ev.values)
+    assert r.sup.events() == []  # drained
