@@ -140,18 +140,25 @@ def test_out_of_range_voltage_is_clamped_like_a_dac():
 
 
 class RecordingSupervisor:
+    """The SafetySupervisor interface: passes the last command through unless e-stopped."""
+
     def __init__(self):
-        self.commands, self.samples = [], []
+        self.commands, self.samples, self.now = [], [], []
+        self.last = {"linear": NEUTRAL_V, "rotary": NEUTRAL_V}
         self.estopped = False
 
     def command(self, axis, u, stamp_ns):
         self.commands.append((axis, u, stamp_ns))
+        self.last[axis] = u
 
     def check_sample(self, s):
         self.samples.append(s.k)
 
     def outputs(self, now_ns):
-        return {"linear": NEUTRAL_V, "rotary": NEUTRAL_V} if self.estopped else {}
+        self.now.append(now_ns)
+        return (
+            (NEUTRAL_V, NEUTRAL_V) if self.estopped else (self.last["linear"], self.last["rotary"])
+        )
 
 
 def test_supervisor_sees_every_command_and_sample_and_can_force_neutral():
@@ -167,7 +174,16 @@ def test_supervisor_sees_every_command_and_sample_and_can_force_neutral():
     core.advance()
     assert sup.commands == [("linear", 2.0, 0), ("linear", 3.0, T_NS)]
     assert sup.samples == [0, 1, 2, 3]
+    assert sup.now == [T_NS, 2 * T_NS, 3 * T_NS]  # outputs for tick k+1
     assert plant.applied == [(5.0, 5.0), (2.0, 5.0), (5.0, 5.0)]
+
+
+def test_supervisor_gets_out_of_range_commands_unclamped():
+    sup = RecordingSupervisor()
+    core = LockstepCore(FakePlant(), axes=("linear",), supervisor=sup)
+    s = core.reset()
+    core.offer("linear", s.stamp_ns, 11.0)
+    assert sup.commands == [("linear", 11.0, 0)]
 
 
 def test_bad_mode_and_axes_refused():

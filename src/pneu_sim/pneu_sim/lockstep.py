@@ -20,25 +20,50 @@ Two modes:
     samples than the newest accepted are dropped (:attr:`stale`), a period
     without a fresh answer is counted in :attr:`missed`.
 
-An optional ``supervisor`` (``pneu_driver``'s :class:`SafetySupervisor`
-interface: ``command(axis, u, stamp_ns)``, ``check_sample(sample)``,
-``outputs(now_ns) -> {axis: V}``) sits between the answers and the plant, as
-it does between the controllers and the DAQ in the driver.
+An optional ``supervisor`` (:class:`pneu_driver.safety.SafetySupervisor`:
+``command(axis, u, stamp_ns)``, ``check_sample(sample)``,
+``outputs(now_ns) -> (u_linear, u_rotary)``) sits between the answers and the
+plant, as it does between the controllers and the DAQ in the driver: every
+answer goes to it unclamped, every sample is checked, and what it outputs for
+tick k+1 is what the plant holds. In normal operation it passes the answers
+through unchanged (a one-period-old command is fresh), so the numbers stay
+the runner's. Without a supervisor, answers are clamped to 0–10 V like a DAC.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from pneu_msgs_py.convert import fill_fluid_pressure, fill_joint_state, sample_to_values
 from pneu_msgs_py.params import ParamError, param
 from pneu_msgs_py.samples import AXES, NEUTRAL_V, U_MAX_V, U_MIN_V, SensorSample
+from pneu_msgs_py.topics import PRESSURE_TOPICS
 
-__all__ = ["MODES", "LockstepCore", "SimNodeParams", "active_axes"]
+__all__ = ["MODES", "LockstepCore", "SimNodeParams", "active_axes", "fill_sample_messages"]
 
 MODES = ("lockstep", "realtime")
 AXES_CHOICES = ("linear", "rotary", "both", "none")
+
+
+def fill_sample_messages(
+    msgs: Mapping[str, Any], s: SensorSample, variances: Mapping[str, float] | None = None
+) -> None:
+    """Fill the five sensor messages of sample ``s`` in place (``{topic: message}``).
+
+    Pressures: FluidPressure (Pa abs, ``variance`` in Pa^2 per topic if given);
+    joint states: JointState as :func:`pneu_msgs_py.convert.sample_to_values`
+    lays them out. All stamped with ``s.stamp_ns``.
+    """
+    for topic, (frame, names, pos, vel) in sample_to_values(s).items():
+        m = msgs[topic]
+        if topic in PRESSURE_TOPICS:
+            var = variances.get(topic, 0.0) if variances else 0.0
+            fill_fluid_pressure(m, s.stamp_ns, pos[0], frame, var)
+        else:
+            fill_joint_state(m, s.stamp_ns, names, pos, vel)
 
 
 def active_axes(choice: str) -> tuple[str, ...]:
@@ -164,6 +189,12 @@ class LockstepCore:
         self._check(self.sample)
         return self.sample
 
+    def safe_outputs(self) -> tuple[float, float]:
+        """What a real rig would hold after a stop: the valve-safe 5 V on both axes."""
+        self._hold = dict.fromkeys(AXES, NEUTRAL_V)
+        self._answer = {}
+        return NEUTRAL_V, NEUTRAL_V
+
     def offer(self, axis: str, stamp_ns: int, u_v: float) -> str:
         """Take one controller answer; returns ``accepted``, ``stale``, ``inactive`` or ``invalid``.
 
@@ -186,9 +217,11 @@ class LockstepCore:
             self.stale[axis] += 1
             return "stale"
         self._answer_stamp[axis] = stamp_ns
-        self._answer[axis] = min(max(float(u_v), U_MIN_V), U_MAX_V)
         if self.supervisor is not None:
-            self.supervisor.command(axis, self._answer[axis], stamp_ns)
+            self.supervisor.command(axis, float(u_v), stamp_ns)
+            self._answer[axis] = float(u_v)
+        else:
+            self._answer[axis] = min(max(float(u_v), U_MIN_V), U_MAX_V)
         return "accepted"
 
     @property
@@ -216,12 +249,14 @@ class LockstepCore:
                 self.missed[axis] += 1
         s = self.plant.step(self._hold["linear"], self._hold["rotary"])
         self.steps += 1
-        self._hold.update(self._answer)
-        if self.supervisor is not None:
-            self._hold.update(self.supervisor.outputs(s.stamp_ns))
-        self._answer = {}
         self.sample = s
         self._check(s)
+        if self.supervisor is not None:
+            u_l, u_r = self.supervisor.outputs(s.stamp_ns)  # written at tick k+1
+            self._hold = {"linear": u_l, "rotary": u_r}
+        else:
+            self._hold.update(self._answer)
+        self._answer = {}
         return s
 
     def _check(self, s: SensorSample) -> None:

@@ -1,0 +1,120 @@
+"""The ROS lockstep graph without ROS: sim shell core and controller shell cores over CDR.
+
+:func:`run_loopback` runs a :class:`~pneu_control.runner.RunSpec` exactly as
+``ros2 launch pneu_sim sim.launch.py mode:=lockstep`` does, minus the
+middleware: the sim node's :class:`pneu_sim.lockstep.LockstepCore` publishes
+each sample as the five sensor messages, every message is CDR-serialised
+and deserialised with rosbags' Jazzy typestore (the bytes rclpy puts on the
+wire), each active controller's :class:`~pneu_control.shell_core.ControllerShellCore`
+rebuilds the sample, computes and answers with a valve command stamped with
+the sample's stamp, and the sim core advances when every active axis has
+answered. What is recorded is what the logger would see on the topics.
+
+Same spec and seed -> the in-process runner's numbers (tested); a ROS
+lockstep run adds only transport, so it must give them too (the rclpy test
+in ``test/ros`` checks that on a ROS machine).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from pneu_msgs_py.convert import command_from_msg, controller_state_from_msg, typestore_messages
+from pneu_sim.lockstep import LockstepCore, fill_sample_messages
+from pneu_sim.plant import Plant
+
+from .axis import STATE_FIELDS
+from .metrics import WindowSpec, compute_metrics
+from .runner import SAMPLE_FIELDS, RunResult, RunSpec
+from .shell_core import SENSOR_TOPICS, ControllerShellCore, _new, new_sensor_messages
+
+__all__ = ["CdrWire", "run_loopback"]
+
+_MEASURED = {"linear": "x", "rotary": "omega"}
+
+
+class CdrWire:
+    """Serialise with rosbags' CDR and deserialise again, as the middleware would."""
+
+    def __init__(self) -> None:
+        self.ts = typestore_messages()
+        self.bytes = 0
+        self.messages = 0
+
+    def send(self, msg: Any, ros_type: str) -> Any:
+        for arr in ("position", "velocity", "effort"):  # rosbags wants numpy float64 arrays
+            if hasattr(msg, arr) and not isinstance(getattr(msg, arr), np.ndarray):
+                setattr(msg, arr, np.asarray(getattr(msg, arr), dtype=np.float64))
+        data = self.ts.serialize_cdr(msg, ros_type)
+        self.bytes += len(data)
+        self.messages += 1
+        return self.ts.deserialize_cdr(data, ros_type)
+
+
+def run_loopback(spec: RunSpec, *, supervisor: Any | None = None) -> RunResult:
+    """Run ``spec`` through the shells' per-sample code and CDR (see module docstring)."""
+    wire = CdrWire()
+    types = wire.ts.types
+    plant = Plant(spec.plant, seed=spec.seed)
+    core = LockstepCore(plant, axes=tuple(spec.axes), x0=spec.x0, supervisor=supervisor)
+    shells = {axis: ControllerShellCore(axis, spec.controllers[axis]) for axis in spec.axes}
+    n = int(round(spec.duration_s / plant.T))
+    ptype = {
+        t: ("sensor_msgs/msg/FluidPressure" if "pressure" in t else "sensor_msgs/msg/JointState")
+        for t in SENSOR_TOPICS
+    }
+    js = "sensor_msgs/msg/JointState"
+
+    rec_samples = []
+    rec_state: dict[str, list[tuple[float, ...]]] = {a: [] for a in spec.axes}
+    rec_u: dict[str, list[float]] = {a: [] for a in spec.axes}
+    algorithms: dict[str, str] = {}
+    t_wall = time.perf_counter()
+    s = core.reset()
+    for _ in range(n):
+        out = new_sensor_messages(types)
+        fill_sample_messages(out, s)
+        wired = {topic: wire.send(out[topic], ptype[topic]) for topic in SENSOR_TOPICS}
+        for axis, shell in shells.items():
+            cmd, state = _new(types, js), _new(types, js)
+            for topic in SENSOR_TOPICS:  # one publication order; the assembler copes with any
+                if shell.step(topic, wired[topic], cmd, state):
+                    got_cmd = wire.send(cmd, js)
+                    got_state = wire.send(state, js)
+                    stamp, u = command_from_msg(got_cmd, axis)
+                    if core.offer(axis, stamp, u) != "accepted":
+                        raise RuntimeError(f"{axis}: answer to {stamp} ns not accepted")
+                    st_stamp, alg, values = controller_state_from_msg(got_state)
+                    if st_stamp != stamp:
+                        raise RuntimeError(f"{axis}: state stamped {st_stamp}, command {stamp}")
+                    rec_state[axis].append(tuple(values[f] for f in STATE_FIELDS))
+                    rec_u[axis].append(u)
+                    algorithms[axis] = alg
+        rec_samples.append(s)
+        if not core.complete:
+            raise RuntimeError(f"lockstep: no answer from {core.waiting_for} to sample {s.k}")
+        s = core.advance()
+    wall = time.perf_counter() - t_wall
+
+    t = np.array([r.stamp_ns for r in rec_samples], dtype=np.int64) * 1e-9
+    samples = {
+        f: np.array([getattr(r, f) for r in rec_samples], dtype=float) for f in SAMPLE_FIELDS
+    }
+    axes: dict[str, dict[str, np.ndarray]] = {}
+    metrics = {}
+    m = len(rec_samples)
+    for axis in spec.axes:
+        block = np.array(rec_state[axis], dtype=float).reshape(m, len(STATE_FIELDS))
+        cols = {name: block[:, i] for i, name in enumerate(STATE_FIELDS)}
+        cols["u"] = np.array(rec_u[axis], dtype=float)
+        axes[axis] = cols
+        window = spec.windows.get(axis, WindowSpec(kind="fixed"))
+        if m > 1:
+            metrics[axis] = compute_metrics(
+                axis, t, cols["reference"], samples[_MEASURED[axis]], window
+            )
+    result = RunResult(spec, t, samples, axes, algorithms, metrics, wall)
+    result.wire = {"messages": wire.messages, "bytes": wire.bytes, **core.counters()}  # type: ignore[attr-defined]
+    return result
