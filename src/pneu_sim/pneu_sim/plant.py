@@ -80,6 +80,18 @@ def neutral_leak_pressure(prm: np.ndarray, base: int, p_s: float, p_a: float) ->
     return 0.5 * (lo + hi)
 
 
+_SETTABLE = {
+    "x": k.S_X,
+    "v": k.S_V,
+    "p_c1": k.S_PC1,
+    "p_c2": k.S_PC2,
+    "theta": k.S_TH,
+    "omega": k.S_OM,
+    "p_m1": k.S_PM1,
+    "p_m2": k.S_PM2,
+}
+
+
 class Plant:
     """Linear-rotary pneumatic actuator twin, stepped at the DAQ period T.
 
@@ -226,6 +238,36 @@ class Plant:
             u_linear=s[k.S_UL],
             u_rotary=s[k.S_UR],
         )
+
+    def set_state(self, **values: float) -> None:
+        """Overwrite physical states (x, v, p_c1, p_c2, theta, omega, p_m1, p_m2; SI).
+
+        For tests and scenario set-up. Chamber masses follow p V / (R T0); the sensor
+        lags jump to the new values. Refused whole if any name or value is bad.
+        """
+        p = self.params
+        half = 0.5 * p.linear.L
+        for name, val in values.items():
+            if name not in _SETTABLE:
+                raise ParamError(name, val, "one of " + ", ".join(_SETTABLE))
+            if not math.isfinite(val):
+                raise ParamError(name, val, "a finite number")
+            if name.startswith("p_") and val <= 0.0:
+                raise ParamError(name, val, "(0, inf) Pa")
+            if name == "x" and abs(val) > half:
+                raise ParamError(name, val, f"[{-half:g}, {half:g}] m")
+        st = self._st
+        for name, val in values.items():
+            st[_SETTABLE[name]] = float(val)
+        lin = p.linear
+        RT = p.ambient.R * p.ambient.T_0
+        x = st[k.S_X]
+        st[k.S_MC1] = st[k.S_PC1] * (lin.V_1d + lin.A_c1 * (half + x)) / RT
+        st[k.S_MC2] = st[k.S_PC2] * (lin.V_2d + lin.A_c2 * (half - x)) / RT
+        st[k.S_FP1] = st[k.S_PC1]
+        st[k.S_FP2] = st[k.S_PC2]
+        st[k.S_FPM1] = st[k.S_PM1]
+        st[k.S_FX] = x
 
     def set_params(self, params: PlantParams) -> None:
         """Swap the plant mid-run (fault injection: supply drop, added mass); keeps state.
