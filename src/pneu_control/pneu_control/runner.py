@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import math
-import operator
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -123,7 +122,6 @@ def run(
     ctrls = {axis: AxisController(axis, spec.controllers[axis]) for axis in spec.axes}
     lin = ctrls.get("linear")
     rot = ctrls.get("rotary")
-    get_state = operator.attrgetter(*STATE_FIELDS)
     rec_samples: list[SensorSample] = []
     rec_state: dict[str, list[tuple[float, ...]]] = {axis: [] for axis in ctrls}
     rec_u: dict[str, list[float]] = {axis: [] for axis in ctrls}
@@ -141,10 +139,10 @@ def run(
             u_r = rot.update(s) if rot is not None else NEUTRAL_V
             rec_samples.append(s)
             if lin is not None:
-                rec_state["linear"].append(get_state(lin.state))
+                rec_state["linear"].append(lin.state_values())
                 rec_u["linear"].append(u_l)
             if rot is not None:
-                rec_state["rotary"].append(get_state(rot.state))
+                rec_state["rotary"].append(rot.state_values())
                 rec_u["rotary"].append(u_r)
             if bag is not None:
                 _log_cycle(bag, s, ctrls, u_l, u_r)
