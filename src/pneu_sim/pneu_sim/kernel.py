@@ -469,7 +469,7 @@ def sample(st, prm, noise, j, out, count_prev):
     st[S_CNT] = cnt
 
 
-@njit(cache=True)
+@njit("void(f8[::1], f8[::1], f8[:, ::1], i8, f8, f8, f8[::1])", cache=True)
 def step_period(st, prm, noise, j, u_l, u_r, out):
     """Hold the AO values for one period T (n_sub substeps), then sample the sensors."""
     ul = ao_value(prm, u_l)
