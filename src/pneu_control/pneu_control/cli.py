@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 __all__ = ["main", "SUBCOMMANDS"]
@@ -65,9 +66,19 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("pneu: interrupted", file=sys.stderr)
         return 130
-    except (ValueError, OSError, UserError) as err:
+    except Exception as err:
+        if not _is_user_error(err) or os.environ.get("PNEU_DEBUG"):
+            raise
         print(f"pneu {args.command}: error: {err}", file=sys.stderr)
         return 1
+
+
+def _is_user_error(err: Exception) -> bool:
+    """Errors a user can fix (bad config, option, file) -> one line, no traceback."""
+    from pneu_msgs_py.bag.errors import BagError
+    from pneu_msgs_py.params import ParamError
+
+    return isinstance(err, (ParamError, BagError, UserError, OSError, ValueError))
 
 
 if __name__ == "__main__":

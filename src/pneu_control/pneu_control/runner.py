@@ -177,9 +177,5 @@ def run(
 def _log_cycle(bag: Any, s: SensorSample, ctrls: dict[str, AxisController], u_l: float, u_r: float):
     bag.write_sample(s)
     for axis, c in ctrls.items():
-        u = u_l if axis == "linear" else u_r
-        bag.write_command(axis, s.stamp_ns, u)
-        st = c.state
-        bag.write_controller_state(
-            axis, s.stamp_ns, operator.attrgetter(*STATE_FIELDS)(st), st.algorithm
-        )
+        bag.write_command(axis, s.stamp_ns, u_l if axis == "linear" else u_r)
+        bag.write_controller_state(axis, s.stamp_ns, c.state_values(), c.algorithm)

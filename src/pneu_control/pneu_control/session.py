@@ -197,3 +197,10 @@ def execute(
             result = run(spec, progress=report)
     result.save(out, config_echo=echo)
     return result
+
+
+def metrics_from_bag(path: str | Path, axis: str):
+    """The metrics of ``axis`` computed from the bag alone (the analysis path)."""
+    from .analysis import analyze
+
+    return analyze(path).metrics[axis]

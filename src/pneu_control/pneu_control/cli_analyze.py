@@ -1,0 +1,45 @@
+"""``pneu analyze``: the paper's metrics of a recorded run, from the bag alone."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+from .analysis import analyze
+from .metrics import WindowSpec
+
+NAME = "analyze"
+HELP = "metrics (e_max, RMSE per axis, DESIGN §7) of a run bag (.mcap file or rosbag2 directory)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run", metavar="RUN", help=".mcap file or rosbag2 directory")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument(
+        "--window-start",
+        type=float,
+        default=None,
+        metavar="S",
+        help="steady-state window start (default: from the bag's metadata)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    window = (
+        None if args.window_start is None else WindowSpec(kind="fixed", t_start_s=args.window_start)
+    )
+    res = analyze(args.run, window=window)
+    if args.json:
+        print(json.dumps(res.to_dict(), indent=2, sort_keys=True))
+        return 0
+    for w in res.warnings:
+        print(f"warning: {w}")
+    for axis, m in res.metrics.items():
+        alg = res.traces[axis].algorithm
+        ws = "never" if math.isnan(m.window_start_s) else f"{m.window_start_s:.2f}"
+        print(
+            f"{axis:7s} {alg:12s} e_max = {m.e_max:.4f} {m.unit}   RMSE = {m.rmse:.4f} {m.unit}"
+            f"   window {ws}–{m.window_end_s:.2f} s ({m.n_samples} samples)"
+        )
+    return 0
