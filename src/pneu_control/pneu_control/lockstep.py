@@ -18,10 +18,12 @@ in ``test/ros`` checks that on a ROS machine).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from pneu_msgs_py.convert import command_from_msg, controller_state_from_msg, typestore_messages
+from pneu_msgs_py.topics import CLOCK_TOPIC, CONTROLLER_STATE_TOPIC, VALVE_COMMAND_TOPIC
 from pneu_sim.lockstep import LockstepCore, fill_sample_messages
 from pneu_sim.plant import Plant
 
@@ -36,26 +38,41 @@ _MEASURED = {"linear": "x", "rotary": "omega"}
 
 
 class CdrWire:
-    """Serialise with rosbags' CDR and deserialise again, as the middleware would."""
+    """Serialise with rosbags' CDR and deserialise again, as the middleware would.
 
-    def __init__(self) -> None:
+    ``tap(topic, ros_type, data)`` sees every message's bytes (a logger's view).
+    """
+
+    def __init__(self, tap: Callable[[str, str, bytes], None] | None = None) -> None:
         self.ts = typestore_messages()
         self.bytes = 0
         self.messages = 0
+        self.tap = tap
 
-    def send(self, msg: Any, ros_type: str) -> Any:
+    def send(self, topic: str, msg: Any, ros_type: str) -> Any:
         for arr in ("position", "velocity", "effort"):  # rosbags wants numpy float64 arrays
             if hasattr(msg, arr) and not isinstance(getattr(msg, arr), np.ndarray):
                 setattr(msg, arr, np.asarray(getattr(msg, arr), dtype=np.float64))
-        data = self.ts.serialize_cdr(msg, ros_type)
+        data = bytes(self.ts.serialize_cdr(msg, ros_type))
         self.bytes += len(data)
         self.messages += 1
+        if self.tap is not None:
+            self.tap(topic, ros_type, data)
         return self.ts.deserialize_cdr(data, ros_type)
 
 
-def run_loopback(spec: RunSpec, *, supervisor: Any | None = None) -> RunResult:
-    """Run ``spec`` through the shells' per-sample code and CDR (see module docstring)."""
-    wire = CdrWire()
+def run_loopback(
+    spec: RunSpec,
+    *,
+    supervisor: Any | None = None,
+    tap: Callable[[str, str, bytes], None] | None = None,
+) -> RunResult:
+    """Run ``spec`` through the shells' per-sample code and CDR (see module docstring).
+
+    ``tap(topic, ros_type, data)`` receives every message as published, in
+    publication order, ``/clock`` included (e.g. a :class:`LoggerCore`).
+    """
+    wire = CdrWire(tap)
     types = wire.ts.types
     plant = Plant(spec.plant, seed=spec.seed)
     core = LockstepCore(plant, axes=tuple(spec.axes), x0=spec.x0, supervisor=supervisor)
@@ -72,17 +89,24 @@ def run_loopback(spec: RunSpec, *, supervisor: Any | None = None) -> RunResult:
     rec_u: dict[str, list[float]] = {a: [] for a in spec.axes}
     algorithms: dict[str, str] = {}
     t_wall = time.perf_counter()
+    Time = types["builtin_interfaces/msg/Time"]
+    ClockMsg = types["rosgraph_msgs/msg/Clock"]
     s = core.reset()
     for _ in range(n):
+        if tap is not None:  # /clock first, as the sim node publishes it (nobody here reads it)
+            sec, nsec = divmod(s.stamp_ns, 1_000_000_000)
+            wire.send(
+                CLOCK_TOPIC, ClockMsg(clock=Time(sec=sec, nanosec=nsec)), "rosgraph_msgs/msg/Clock"
+            )
         out = new_sensor_messages(types)
         fill_sample_messages(out, s)
-        wired = {topic: wire.send(out[topic], ptype[topic]) for topic in SENSOR_TOPICS}
+        wired = {topic: wire.send(topic, out[topic], ptype[topic]) for topic in SENSOR_TOPICS}
         for axis, shell in shells.items():
             cmd, state = _new(types, js), _new(types, js)
             for topic in SENSOR_TOPICS:  # one publication order; the assembler copes with any
                 if shell.step(topic, wired[topic], cmd, state):
-                    got_cmd = wire.send(cmd, js)
-                    got_state = wire.send(state, js)
+                    got_cmd = wire.send(VALVE_COMMAND_TOPIC[axis], cmd, js)
+                    got_state = wire.send(CONTROLLER_STATE_TOPIC[axis], state, js)
                     stamp, u = command_from_msg(got_cmd, axis)
                     if core.offer(axis, stamp, u) != "accepted":
                         raise RuntimeError(f"{axis}: answer to {stamp} ns not accepted")

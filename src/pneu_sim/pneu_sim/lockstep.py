@@ -136,6 +136,15 @@ class SimNodeParams:
     plant_file: str = param(
         "", desc="plant YAML ('' = plant.yaml of the installed config)", read_only=True
     )
+    safety: bool = param(
+        True,
+        desc="put the SafetySupervisor (safety_file) between the commands and the plant, as on "
+        "the rig; transparent unless a rule trips",
+        read_only=True,
+    )
+    safety_file: str = param(
+        "", desc="safety YAML ('' = safety.yaml of the installed config)", read_only=True
+    )
     lockstep: LockstepParams = param(LockstepParams)
 
 
