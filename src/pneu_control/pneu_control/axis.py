@@ -15,9 +15,12 @@ in-process runner. Per :class:`~pneu_msgs_py.samples.SensorSample` it
 
 ``set_params`` validates the whole new set (including the reference and its
 waypoint file) before anything changes; the new set takes effect at the next
-``update``. Every change, including an algorithm switch, is bumpless: the new
-algorithm starts from the measurement, the old algorithm's velocity estimate
-and the last command, and its first command equals the last one.
+``update``. Every change, including an algorithm switch, is bumpless: a fresh
+instance of the (new) algorithm starts from the old one's estimates (y, ẏ, ÿ)
+with physically consistent states (see :mod:`.algorithms.base`); the
+difference δ between its first command and the last command is added as an
+offset that decays as exp(−t/bumpless_time_s). The first command after a
+switch equals the last one; the TD keeps running through the switch.
 
 The ESO is fed the command that was actually on the valve during the last
 sample period: with ``transport_delay_samples = d`` (DESIGN §3: 1) that is the
@@ -26,6 +29,7 @@ command computed d + 1 samples ago.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from pneu_msgs_py.params import ParamError, validate
@@ -119,6 +123,9 @@ class AxisController:
         self._use_td = alg.uses_td and params.td.enabled
         self._neutral = params.limits.u_neutral
         self._delay = params.transport_delay_samples
+        self._u_lo = params.limits.u_min
+        self._u_hi = params.limits.u_max
+        self._a_blend = math.exp(-params.sample_time_s / params.bumpless_time_s)
 
     @property
     def params(self) -> AxisControllerParams:
@@ -127,6 +134,11 @@ class AxisController:
     @property
     def algorithm(self) -> str:
         return self._alg.name
+
+    @property
+    def bumpless_offset(self) -> float:
+        """The decaying offset (V) still being added after the last switch (0 when done)."""
+        return self._blend
 
     def set_params(self, params: AxisControllerParams) -> None:
         """Validate the whole set now (ParamError, old set kept); apply at the next update."""
@@ -157,6 +169,7 @@ class AxisController:
         self._started = False
         self._u_hist = [self._neutral] * (self._delay + 1)  # V, oldest first
         self._u_last = self._neutral
+        self._blend = 0.0  # V, decaying bumpless offset
         self._t = 0.0
         self._r = self._rd = self._y = _NAN
         self._dirty = True
@@ -191,10 +204,18 @@ class AxisController:
         hist = self._u_hist
         neutral = self._neutral
         u = self._alg.update(y, v1, v2, v3, hist[0] - neutral) + neutral
+        if self._blend != 0.0:
+            u = self._blended(u)
         del hist[0]
         hist.append(u)
         self._u_last = u
         return u
+
+    def _blended(self, u: float) -> float:
+        b = self._blend * self._a_blend
+        self._blend = b if abs(b) > 1e-12 else 0.0
+        u += b
+        return self._u_hi if u > self._u_hi else (self._u_lo if u < self._u_lo else u)
 
     def _finish(self, u_dev: float) -> float:
         u = u_dev + self._neutral
@@ -212,12 +233,26 @@ class AxisController:
         else:
             v1, v2, v3 = r, rd, rdd
         self._started = True
-        return self._finish(self._alg.start(y, v1, v2, v3, None, 0.0))
+        return self._finish(self._alg.start(y, v1, v2, v3, None, 0.0, (_NAN, _NAN, _NAN)))
 
     def _switch(self, y, r, rd, rdd) -> float:
         """Apply the pending set bumplessly (see module docstring)."""
-        old_alg, old_use_td = self._alg, self._use_td
-        hint = old_alg.y_dot_est if self._started else 0.0
+        old_alg, old_use_td, started = self._alg, self._use_td, self._started
+        td = self._td
+        n_old = self._neutral
+        u_applied_v = self._u_hist[0]
+        hint = (_NAN, _NAN, _NAN)
+        stepped = False
+        if started:
+            # bring the old algorithm's estimates to this sample (its command is discarded)
+            if old_use_td:
+                td.step(r)
+                stepped = True
+                v1, v2, v3 = td.v1, td.v2, td.v3
+            else:
+                v1, v2, v3 = r, rd, rdd
+            old_alg.update(y, v1, v2, v3, u_applied_v - n_old)
+            hint = old_alg.hint
         params, ref, new_alg = self._pending  # new_alg: a fresh instance, no shared state
         self._pending = None
         self._commit((params, ref, new_alg))
@@ -226,18 +261,26 @@ class AxisController:
         r_si, rd_si, rdd_si = ref(self._t)
         self._r, self._rd = r_si, rd_si
         r, rd, rdd = r_si * k, rd_si * k, rdd_si * k
-        td = self._td
         td.r, td.h = params.td.r, params.td.h
         if self._use_td:
-            if not (old_use_td and self._started):
-                td.reset(r, rd)  # continue from the reference the old algorithm tracked
-            td.step(r)
+            if not stepped:
+                # start the TD on the reference the old algorithm tracked (cold: measurement)
+                if started:  # fhan's steady state on a ramp lags by 2h: v1 = r − 2h ṙ, v2 = ṙ
+                    td.reset(r - 2.0 * td.h * rd, rd)
+                else:
+                    td.reset(y, 0.0)
+                td.step(r)
             v1, v2, v3 = td.v1, td.v2, td.v3
         else:
             v1, v2, v3 = r, rd, rdd
-        u_prev = (self._u_last - self._neutral) if self._started else None
         self._started = True
-        return self._finish(new_alg.start(y, v1, v2, v3, u_prev, hint))
+        if not started:
+            return self._finish(new_alg.start(y, v1, v2, v3, None, 0.0, hint))
+        n = self._neutral
+        u_new = new_alg.start(y, v1, v2, v3, self._u_last - n, u_applied_v - n, hint) + n
+        # bumpless: the first command equals the last one; the offset then decays
+        self._blend = (self._u_last - u_new) / self._a_blend  # _blended() decays it once
+        return self._finish(self._blended(u_new) - n)
 
     # -- what it did --------------------------------------------------------
     @property

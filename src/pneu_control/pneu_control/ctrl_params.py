@@ -296,6 +296,15 @@ class AxisControllerParams:
         hi=5,
         read_only=True,
     )
+    bumpless_time_s: float = param(
+        0.1,
+        unit="s",
+        desc="time constant of the decaying offset that blends a switched algorithm's first "
+        "command into the last one (no jump; per-sample change ≤ offset·T/τ)",
+        lo=0.0,
+        lo_open=True,
+        hi=10.0,
+    )
 
     def _check(self) -> None:
         T = self.sample_time_s

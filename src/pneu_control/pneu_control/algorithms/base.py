@@ -8,19 +8,25 @@ the tracking differentiator when ``uses_td`` and adds the neutral voltage.
 
 Per sample the controller calls exactly one of
 
-- ``start(y, r, r_dot, r_ddot, u_prev, y_dot_hint) -> u`` -- first sample of
-  this algorithm: initialise the states from the measurement. With
-  ``u_prev = None`` (cold start) the disturbance estimate/integral start at
-  zero; with ``u_prev`` (a run-time switch, or a parameter change) they are
-  chosen so that the returned command equals ``u_prev``: bumpless.
+- ``start(y, r, r_dot, r_ddot, u_prev, u_applied, hint) -> u`` -- first
+  sample of this algorithm. ``u_prev`` is None on a cold start (states from
+  the measurement, disturbance estimate and integral zero); on a run-time
+  switch or parameter change it is the last command, ``u_applied`` the one on
+  the valve during the last period and ``hint = (y, ẏ, ÿ)`` the previous
+  algorithm's estimates (NaN if it had none). The states are initialised
+  *physically consistently* (z3 = ÿ − b0 u_applied, assuming ÿ = 0 when
+  unknown); PID chooses its integral so that its output equals ``u_prev``.
+  Whatever difference remains between the returned command and ``u_prev`` is
+  blended out by the controller (a decaying offset, ``bumpless_time_s``), so
+  the valve command never jumps.
 - ``update(y, r, r_dot, r_ddot, u_applied) -> u`` -- every later sample.
   ``u_applied`` is the (saturated) deviation that was on the valve during
   the last sample period (the ESO predicts with it).
 
 Both return the saturated deviation and leave readable attributes:
 ``z1, z2, z3`` (observer states, NaN if none), ``s`` (sliding variable, NaN
-if none), ``u_raw`` (unsaturated deviation), ``y_dot_est`` (the algorithm's
-own estimate of ẏ, used as the hint of the next algorithm on a switch).
+if none), ``u_raw`` (unsaturated deviation) and ``hint`` (its estimates
+(y, ẏ, ÿ), handed to the next algorithm on a switch).
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ class Algorithm(Protocol):
     u_raw: float
 
     @property
-    def y_dot_est(self) -> float: ...
+    def hint(self) -> tuple[float, float, float]: ...
 
     def start(
         self,
@@ -51,7 +57,8 @@ class Algorithm(Protocol):
         r_dot: float,
         r_ddot: float,
         u_prev: float | None,
-        y_dot_hint: float,
+        u_applied: float,
+        hint: tuple[float, float, float],
     ) -> float: ...
 
     def update(

@@ -22,8 +22,14 @@ the paper's k = 0.5, Δ = 0.1 is accepted (discontinuous) as printed. The
 discrete boundary layer s(k+1) = s(k) − T ε k s(k−1) needs T ε k < 1
 (checked by :class:`~pneu_control.ctrl_params.AxisControllerParams`).
 
-∫e uses the rectangle rule; with ``integral_anti_windup`` the step is undone
-while the command is saturated in the direction e pushes.
+∫e uses the rectangle rule. With ``integral_anti_windup`` (conditional
+integration) the step is skipped while e pushes further into a saturation:
+the valve command (u at a limit) or the reaching law (|s| > Δ with e of the
+sign of s). Without the second condition a large λ²∫e keeps sat(s) = ±1 and,
+because |ṡ| ≤ ε, leaves an offset e = ∓ε/λ² (0.019 mm with the paper's linear
+gains) for |s|/ε seconds (tens of seconds after a blocked axis). The error
+dynamics ë + 2λė + λ²e = −ε sat(s) do not contain ∫e, so freezing it never
+changes the double pole.
 
 Rotary friction compensation (Eq. 31 with Eq. 9, errata: M_f/J_m). Our rotary
 model is the speed loop (y = ω in rpm, ẏ = ω̇, ÿ = f + b0 u): Eq. 7 puts
@@ -84,10 +90,11 @@ class EsoSmc:
         self.integral = 0.0
         self.u_raw = 0.0
         self.f_k = 0.0
+        self.u_in = 0.0
 
     @property
-    def y_dot_est(self) -> float:
-        return self.z2
+    def hint(self) -> tuple[float, float, float]:
+        return self.z1, self.z2, self.z3 + self.b0 * self.u_in + self.f_k
 
     def friction_term(self, z1: float, z2: float) -> float:
         """f_k (rpm/s²) of the rotary friction model; 0 when off."""
@@ -105,19 +112,24 @@ class EsoSmc:
             return -1.0
         return self.k * s
 
-    def start(self, y, r, r_dot, r_ddot, u_prev, y_dot_hint):
-        self.z1 = y
-        self.z2 = z2 = y_dot_hint if math.isfinite(y_dot_hint) else 0.0
-        self.integral = 0.0
-        e = r - y
-        ed = r_dot - z2
-        s = ed + self.c1 * e
-        self.s = s
-        f_k = self.friction_term(y, z2)
+    def start(self, y, r, r_dot, r_ddot, u_prev, u_applied, hint):
+        self.z1 = z1 = hint[0] if math.isfinite(hint[0]) else y
+        self.z2 = z2 = hint[1] if math.isfinite(hint[1]) else 0.0
+        f_k = self.friction_term(z1, z2)
         self.f_k = f_k
+        self.u_in = u_applied
+        e = r - z1
+        ed = r_dot - z2
+        if u_prev is None:  # cold start: ∫e from 0 (Eq. 26), no disturbance estimate
+            self.z3 = 0.0
+            self.integral = 0.0
+        else:  # switch: z3 = ÿ − b0 u_applied − f_k; start on the surface (s = 0)
+            a = hint[2] if math.isfinite(hint[2]) else 0.0
+            self.z3 = a - self.b0 * u_applied - f_k
+            self.integral = -(ed + self.c1 * e) / self.c2
+        s = ed + self.c1 * e + self.c2 * self.integral
+        self.s = s
         nominal = self.eps * self._sat(s) + r_ddot + self.c1 * ed + self.c2 * e - f_k
-        # cold start: z3 = 0; switch: z3 such that u = u_prev (bumpless)
-        self.z3 = 0.0 if u_prev is None else nominal - self.b0 * u_prev
         u = (nominal - self.z3) / self.b0
         self.u_raw = u
         return self.hi if u > self.hi else (self.lo if u < self.lo else u)
@@ -126,6 +138,7 @@ class EsoSmc:
         T = self.T
         # ESO, Eq. 18 discretised (pneu_control.eso.LinearEso.update), f_k held
         z2, z3 = self.z2, self.z3
+        self.u_in = u_applied
         acc = z3 + self.b0 * u_applied + self.f_k
         z1p = self.z1 + T * z2 + self.T2h * acc
         z2p = z2 + T * acc
@@ -157,13 +170,12 @@ class EsoSmc:
         u = (self.eps * sat + r_ddot + c1 * ed + c2 * e - z3 - f_k) / self.b0
         self.u_raw = u
         hi, lo = self.hi, self.lo
-        if u > hi:
-            if not (self.aw and e > 0.0):
+        if self.aw:  # conditional integration (see module docstring)
+            if e > 0.0:
+                if not (u > hi or s > d):
+                    self.integral = integral
+            elif not (u < lo or s < -d):
                 self.integral = integral
-            return hi
-        if u < lo:
-            if not (self.aw and e < 0.0):
-                self.integral = integral
-            return lo
-        self.integral = integral
-        return u
+        else:
+            self.integral = integral
+        return hi if u > hi else (lo if u < lo else u)

@@ -47,21 +47,20 @@ class Ladrc:
         self.z1 = self.z2 = self.z3 = 0.0
         self.s = NAN
         self.u_raw = 0.0
+        self.u_in = 0.0
 
     @property
-    def y_dot_est(self) -> float:
-        return self.z2
+    def hint(self) -> tuple[float, float, float]:
+        return self.z1, self.z2, self.z3 + self.b0 * self.u_in
 
-    def _law(self, r, r_dot, r_ddot):
+    def start(self, y, r, r_dot, r_ddot, u_prev, u_applied, hint):
+        self.z1 = hint[0] if math.isfinite(hint[0]) else y
+        self.z2 = hint[1] if math.isfinite(hint[1]) else 0.0
+        # z3 = ÿ − b0 u_applied: physically consistent (ÿ = 0 if unknown; cold start: 0)
+        a = hint[2] if math.isfinite(hint[2]) else 0.0
+        self.u_in = u_applied
+        self.z3 = 0.0 if u_prev is None else a - self.b0 * u_applied
         u0 = self.kp * (r - self.z1) + self.kd * (r_dot - self.z2) + self.ff * r_ddot
-        return u0
-
-    def start(self, y, r, r_dot, r_ddot, u_prev, y_dot_hint):
-        self.z1 = y
-        self.z2 = y_dot_hint if math.isfinite(y_dot_hint) else 0.0
-        u0 = self._law(r, r_dot, r_ddot)
-        # cold start: no disturbance estimate; switch: z3 such that u = u_prev
-        self.z3 = 0.0 if u_prev is None else u0 - self.b0 * u_prev
         u = (u0 - self.z3) / self.b0
         self.u_raw = u
         return self.hi if u > self.hi else (self.lo if u < self.lo else u)
@@ -70,6 +69,7 @@ class Ladrc:
         # ESO, Eq. 18 discretised (pneu_control.eso.LinearEso.update)
         T = self.T
         z2, z3 = self.z2, self.z3
+        self.u_in = u_applied
         acc = z3 + self.b0 * u_applied
         z1p = self.z1 + T * z2 + self.T2h * acc
         z2p = z2 + T * acc

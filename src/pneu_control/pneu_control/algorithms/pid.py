@@ -52,13 +52,13 @@ class Pid:
         self.r_dot = 0.0
 
     @property
-    def y_dot_est(self) -> float:
-        return self.r_dot - self.d if self.on_error else -self.d
+    def hint(self) -> tuple[float, float, float]:
+        return self.y_f, (self.r_dot - self.d if self.on_error else -self.d), NAN
 
-    def start(self, y, r, r_dot, r_ddot, u_prev, y_dot_hint):
+    def start(self, y, r, r_dot, r_ddot, u_prev, u_applied, hint):
         self.y_f = y
         self.r_dot = r_dot
-        yd = y_dot_hint if math.isfinite(y_dot_hint) else 0.0
+        yd = hint[1] if math.isfinite(hint[1]) else 0.0
         self.d = (r_dot - yd) if self.on_error else -yd
         e = r - y
         if u_prev is None:
