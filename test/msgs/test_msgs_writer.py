@@ -181,3 +181,30 @@ def test_empty_writer_gives_valid_file(tmp_path):
     r = make_reader(open(p, "rb"))
     assert r.get_summary().statistics.message_count == 0
     assert list(r.iter_messages()) == []
+
+
+def test_rosbag2_metadata_record_and_type_hashes(tmp_path):
+    """What `ros2 bag info/play` read from a loose file besides the summary."""
+    import yaml
+
+    p = tmp_path / "run.mcap"
+    make_run(p, n=300, qos="realtime")
+    with open(p, "rb") as f:
+        r = make_reader(f)
+        summary = r.get_summary()
+        recs = {m.name: m.metadata for m in r.iter_metadata()}
+    info = yaml.safe_load(recs["rosbag2"]["serialized_metadata"])
+    assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+    assert info["relative_file_paths"] == ["run.mcap"]
+    st = summary.statistics
+    assert info["message_count"] == st.message_count
+    assert info["starting_time"]["nanoseconds_since_epoch"] == st.message_start_time
+    by_topic = {c.topic: c for c in summary.channels.values()}
+    for t in info["topics_with_message_count"]:
+        tm = t["topic_metadata"]
+        ch = by_topic[tm["name"]]
+        assert t["message_count"] == st.channel_message_counts[ch.id]
+        assert tm["type"] == summary.schemas[ch.schema_id].name
+        assert tm["offered_qos_profiles"] == [qos_for(tm["name"], "realtime").to_dict()]
+        assert ch.metadata["topic_type_hash"] == TS.hash_rihs01(tm["type"])
+        assert tm["type_description_hash"] == ch.metadata["topic_type_hash"]

@@ -12,12 +12,13 @@ Times are int nanoseconds; ``builtin_interfaces/Time`` holds (sec, nanosec).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cache
 from typing import Any
 
 from .samples import SensorSample
-from .topics import PRESSURE_TOPICS, ROTARY_COUNTS_JOINT, valve_joint
+from .topics import JOINT_STATE_TOPIC, PRESSURE_TOPICS, ROTARY_COUNTS_JOINT, valve_joint
 
 __all__ = [
     "DiagStatus",
@@ -30,12 +31,16 @@ __all__ = [
     "fill_valve_command",
     "fill_controller_state",
     "fill_diagnostic_array",
-    "sample_to_values",
     "sample_from_msgs",
     "command_from_msg",
     "controller_state_from_msg",
     "diag_statuses_from_msg",
+    "fill_sensor_joint_states",
     "typestore_messages",
+    "sample_to_typestore",
+    "command_to_typestore",
+    "controller_state_to_typestore",
+    "diagnostics_to_typestore",
 ]
 
 #: DiagnosticStatus levels (diagnostic_msgs: byte OK=0 WARN=1 ERROR=2 STALE=3).
@@ -90,6 +95,10 @@ def fill_fluid_pressure(
     return msg
 
 
+def _floats(values: Sequence[float]) -> list[float]:
+    return [float(v) for v in values]
+
+
 def fill_joint_state(
     msg: Any,
     stamp_ns: int,
@@ -98,11 +107,12 @@ def fill_joint_state(
     velocity: Sequence[float] = (),
     effort: Sequence[float] = (),
     frame_id: str = "",
+    array: Callable[[Sequence[float]], Any] = _floats,
 ) -> Any:
     """Fill a ``sensor_msgs/msg/JointState``; each array empty or one value per name.
 
-    Arrays are assigned as lists of float (rclpy accepts lists and
-    ``array('d')``; rosbags wants numpy arrays -- use :func:`typestore_messages`).
+    ``array`` converts each float sequence: the default (a list of float) suits
+    rclpy; rosbags' typestore classes want ``numpy.asarray(v, dtype=float)``.
     """
     n = len(names)
     for key, arr in (("position", position), ("velocity", velocity), ("effort", effort)):
@@ -110,24 +120,47 @@ def fill_joint_state(
             raise ValueError(f"JointState.{key}: {len(arr)} values for {n} names")
     fill_header(msg.header, stamp_ns, frame_id)
     msg.name = list(names)
-    msg.position = [float(v) for v in position]
-    msg.velocity = [float(v) for v in velocity]
-    msg.effort = [float(v) for v in effort]
+    msg.position = array(position)
+    msg.velocity = array(velocity)
+    msg.effort = array(effort)
     return msg
 
 
-def fill_valve_command(msg: Any, axis: str, stamp_ns: int, u: float) -> Any:
+def fill_sensor_joint_states(
+    linear: Any, rotary: Any, s: SensorSample, array: Callable[[Sequence[float]], Any] = _floats
+) -> tuple[Any, Any]:
+    """The two JointState messages of a sample (see :mod:`pneu_msgs_py.topics`)."""
+    fill_joint_state(linear, s.stamp_ns, ["linear"], position=[s.x], array=array)
+    fill_joint_state(
+        rotary,
+        s.stamp_ns,
+        ["rotary", ROTARY_COUNTS_JOINT],
+        position=[s.theta, float(s.counts)],
+        velocity=[s.omega, math.nan],
+        array=array,
+    )
+    return linear, rotary
+
+
+def fill_valve_command(
+    msg: Any, axis: str, stamp_ns: int, u: float, array: Callable[[Sequence[float]], Any] = _floats
+) -> Any:
     """Valve command as JointState: name [<axis>_valve], effort [u V]; stamp = answered sample."""
-    return fill_joint_state(msg, stamp_ns, [valve_joint(axis)], effort=[u])
+    return fill_joint_state(msg, stamp_ns, [valve_joint(axis)], effort=[u], array=array)
 
 
 def fill_controller_state(
-    msg: Any, stamp_ns: int, fields: Sequence[str], values: Sequence[float], algorithm: str
+    msg: Any,
+    stamp_ns: int,
+    fields: Sequence[str],
+    values: Sequence[float],
+    algorithm: str,
+    array: Callable[[Sequence[float]], Any] = _floats,
 ) -> Any:
     """Controller state as JointState: name = fields, position = values, frame_id = algorithm."""
     if len(fields) != len(values):
         raise ValueError(f"controller state: {len(values)} values for {len(fields)} fields")
-    return fill_joint_state(msg, stamp_ns, fields, position=values, frame_id=algorithm)
+    return fill_joint_state(msg, stamp_ns, fields, position=values, frame_id=algorithm, array=array)
 
 
 def fill_diagnostic_array(
@@ -155,21 +188,6 @@ def fill_diagnostic_array(
         out.append(m)
     msg.status = out
     return msg
-
-
-def sample_to_values(s: SensorSample) -> dict[str, tuple[str, list[str], list[float], list[float]]]:
-    """Per topic of the sample: (frame_id, names, position, velocity) (pressures: value in position)."""
-    out: dict[str, tuple[str, list[str], list[float], list[float]]] = {}
-    for topic, (attr, frame) in PRESSURE_TOPICS.items():
-        out[topic] = (frame, [], [getattr(s, attr)], [])
-    out["/pneu/linear/joint_state"] = ("", ["linear"], [s.x], [])
-    out["/pneu/rotary/joint_state"] = (
-        "",
-        ["rotary", ROTARY_COUNTS_JOINT],
-        [s.theta, float(s.counts)],
-        [s.omega, math.nan],
-    )
-    return out
 
 
 def sample_from_msgs(
@@ -250,18 +268,91 @@ def diag_statuses_from_msg(msg: Any) -> list[DiagStatus]:
     return out
 
 
-_TYPESTORE: Any = None
-
-
+@cache
 def _typestore() -> Any:
-    global _TYPESTORE
-    if _TYPESTORE is None:
-        from rosbags.typesys import Stores, get_typestore
+    """The rosbags Jazzy typestore (created once, on first use)."""
+    from rosbags.typesys import Stores, get_typestore
 
-        _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-    return _TYPESTORE
+    return get_typestore(Stores.ROS2_JAZZY)
 
 
 def typestore_messages() -> Any:
-    """The rosbags Jazzy typestore (lazily created; for tests and offline tools)."""
+    """The rosbags Jazzy typestore (for tests and offline tools)."""
     return _typestore()
+
+
+def _np_array(values: Sequence[float]) -> Any:
+    import numpy as np
+
+    return np.asarray(values, dtype=np.float64)
+
+
+def _ts_new(ros_type: str) -> Any:
+    """An empty rosbags message of ``ros_type`` (fields zero / empty)."""
+    ts = _typestore()
+    T = ts.types
+    time = T["builtin_interfaces/msg/Time"]
+    header = T["std_msgs/msg/Header"]
+    if ros_type == "sensor_msgs/msg/FluidPressure":
+        return T[ros_type](
+            header=header(stamp=time(sec=0, nanosec=0), frame_id=""),
+            fluid_pressure=0.0,
+            variance=0.0,
+        )
+    if ros_type == "sensor_msgs/msg/JointState":
+        e = _np_array(())
+        return T[ros_type](
+            header=header(stamp=time(sec=0, nanosec=0), frame_id=""),
+            name=[],
+            position=e,
+            velocity=e,
+            effort=e,
+        )
+    if ros_type == "diagnostic_msgs/msg/DiagnosticArray":
+        return T[ros_type](header=header(stamp=time(sec=0, nanosec=0), frame_id=""), status=[])
+    if ros_type == "rosgraph_msgs/msg/Clock":
+        return T[ros_type](clock=time(sec=0, nanosec=0))
+    raise KeyError(ros_type)
+
+
+def sample_to_typestore(s: SensorSample, variance: float = 0.0) -> dict[str, Any]:
+    """The five sensor messages of a sample as rosbags Jazzy objects, keyed by topic."""
+    out: dict[str, Any] = {}
+    for topic, (attr, frame) in PRESSURE_TOPICS.items():
+        out[topic] = fill_fluid_pressure(
+            _ts_new("sensor_msgs/msg/FluidPressure"), s.stamp_ns, getattr(s, attr), frame, variance
+        )
+    lin, rot = fill_sensor_joint_states(
+        _ts_new("sensor_msgs/msg/JointState"), _ts_new("sensor_msgs/msg/JointState"), s, _np_array
+    )
+    out[JOINT_STATE_TOPIC["linear"]] = lin
+    out[JOINT_STATE_TOPIC["rotary"]] = rot
+    return out
+
+
+def command_to_typestore(axis: str, stamp_ns: int, u: float) -> Any:
+    """A valve command as a rosbags JointState."""
+    return fill_valve_command(_ts_new("sensor_msgs/msg/JointState"), axis, stamp_ns, u, _np_array)
+
+
+def controller_state_to_typestore(
+    stamp_ns: int, fields: Sequence[str], values: Sequence[float], algorithm: str
+) -> Any:
+    """A controller state as a rosbags JointState."""
+    return fill_controller_state(
+        _ts_new("sensor_msgs/msg/JointState"), stamp_ns, fields, values, algorithm, _np_array
+    )
+
+
+def diagnostics_to_typestore(stamp_ns: int, statuses: Sequence[DiagStatus]) -> Any:
+    """A DiagnosticArray as a rosbags object."""
+    T = _typestore().types
+    return fill_diagnostic_array(
+        _ts_new("diagnostic_msgs/msg/DiagnosticArray"),
+        lambda: T["diagnostic_msgs/msg/DiagnosticStatus"](
+            level=0, name="", message="", hardware_id="", values=[]
+        ),
+        lambda: T["diagnostic_msgs/msg/KeyValue"](key="", value=""),
+        stamp_ns,
+        statuses,
+    )

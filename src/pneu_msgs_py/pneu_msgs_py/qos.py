@@ -90,6 +90,23 @@ class QosProfile:
         if self.depth < 0:
             raise ValueError(f"qos.depth: {self.depth!r} refused; allowed: >= 0")
 
+    def to_dict(self) -> dict[str, Any]:
+        """As rosbag2 (v9) lists it in metadata.yaml's ``offered_qos_profiles``."""
+        return {
+            "history": self.history,
+            "depth": self.depth,
+            "reliability": self.reliability,
+            "durability": self.durability,
+            "deadline": {"sec": self.deadline[0], "nsec": self.deadline[1]},
+            "lifespan": {"sec": self.lifespan[0], "nsec": self.lifespan[1]},
+            "liveliness": self.liveliness,
+            "liveliness_lease_duration": {
+                "sec": self.liveliness_lease_duration[0],
+                "nsec": self.liveliness_lease_duration[1],
+            },
+            "avoid_ros_namespace_conventions": self.avoid_ros_namespace_conventions,
+        }
+
     def to_yaml(self) -> str:
         """This profile as one yaml-cpp block-sequence item (no trailing newline)."""
 

@@ -148,24 +148,48 @@ def write_us_per_cycle(n_cycles: int = 100_000, directory: str | None = None) ->
         return (time.perf_counter() - t0) / n_cycles * 1e6
 
 
-def analyze(path: str | os.PathLike) -> tuple[int, dict[str, float]]:
-    """Read every topic and compute per-topic figures; return (messages, figures)."""
-    from .reader import read_run
+def analyze(path: str | os.PathLike, batch_chunks: int = 64) -> tuple[int, dict[str, float]]:
+    """Decode every topic (streamed, bounded memory) and compute per-topic figures.
 
-    data = read_run(path)
-    figs: dict[str, float] = {}
-    for name, ta in data.topics.items():
-        for key, arr in ta.fields.items():
-            if "." in key:
-                continue  # aliases hold the same arrays
-            figs[f"{name}:{key}:mean"] = float(np.mean(arr)) if len(arr) else math.nan
-        if "error" in ta:
-            e = ta["error"]
-            figs[f"{name}:rmse"] = float(np.sqrt(np.mean(e * e)))
-            figs[f"{name}:e_max"] = float(np.max(np.abs(e)))
-        if len(ta) > 1:
-            figs[f"{name}:max_gap_ns"] = float(np.max(np.diff(ta.stamp_ns)))
-    return data.message_count, figs
+    Figures: mean of every field, RMSE and max |e| of controller-state
+    ``error``, largest gap between header stamps. Returns (messages, figures).
+    """
+    from .reader import iter_run
+
+    sums: dict[str, float] = {}
+    counts: dict[str, int] = {}
+    sq: dict[str, float] = {}
+    emax: dict[str, float] = {}
+    gap: dict[str, int] = {}
+    last: dict[str, int] = {}
+    n = 0
+    for batch in iter_run(path, batch_chunks=batch_chunks):
+        n += batch.message_count
+        for name, ta in batch.topics.items():
+            if not len(ta):
+                continue
+            for key, arr in ta.fields.items():
+                if "." in key:
+                    continue  # aliases hold the same arrays
+                k = f"{name}:{key}"
+                sums[k] = sums.get(k, 0.0) + float(np.sum(arr))
+                counts[k] = counts.get(k, 0) + len(arr)
+            if "error" in ta:
+                e = ta["error"]
+                sq[name] = sq.get(name, 0.0) + float(np.dot(e, e))
+                emax[name] = max(emax.get(name, 0.0), float(np.max(np.abs(e))))
+            st = ta.stamp_ns
+            g = int(np.max(np.diff(st))) if len(st) > 1 else 0
+            if name in last:
+                g = max(g, int(st[0]) - last[name])
+            last[name] = int(st[-1])
+            gap[name] = max(gap.get(name, 0), g)
+    figs = {f"{k}:mean": sums[k] / counts[k] for k in sums}
+    for name in sq:
+        figs[f"{name}:rmse"] = math.sqrt(sq[name] / counts[f"{name}:error"])
+        figs[f"{name}:e_max"] = emax[name]
+    figs.update({f"{name}:max_gap_ns": float(g) for name, g in gap.items()})
+    return n, figs
 
 
 def analyze_msgs_per_s(path: str | os.PathLike) -> float:
@@ -201,14 +225,13 @@ def baseline_msgs_per_s(path: str | os.PathLike, max_messages: int = 300_000) ->
     return n / (time.perf_counter() - t0)
 
 
-def peak_rss_mib(path: str | os.PathLike, topics: list[str] | None = None) -> float:
-    """Peak RSS (MiB) of a fresh Python process that runs ``read_run`` on ``path``."""
-    code = (
-        "import resource, sys\n"
-        "from pneu_msgs_py.bag.reader import read_run\n"
-        f"d = read_run({str(path)!r}, {topics!r})\n"
-        "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
-    )
+def peak_rss_mib(path: str | os.PathLike, what: str = "analyze") -> float:
+    """Peak RSS (MiB) of a fresh Python process running ``analyze`` or ``read_run`` on ``path``."""
+    call = {
+        "analyze": f"from pneu_msgs_py.bag.bench import analyze; analyze({str(path)!r})",
+        "read_run": f"from pneu_msgs_py.bag.reader import read_run; read_run({str(path)!r})",
+    }[what]
+    code = f"import resource\n{call}\nprint(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return int(out.stdout.strip().splitlines()[-1]) / 1024
 
@@ -234,7 +257,8 @@ def main(argv: list[str] | None = None) -> int:
     b_rate = baseline_msgs_per_s(path, a.baseline_messages)
     print(f"baseline_msgs_per_s: {b_rate:,.0f} (first {a.baseline_messages} messages)")
     print(f"ratio: {a_rate / b_rate:.1f}x")
-    print(f"peak_rss_mib (read_run, all topics): {peak_rss_mib(path):.0f}")
+    print(f"peak_rss_mib (analyze, streamed): {peak_rss_mib(path):.0f}")
+    print(f"peak_rss_mib (read_run, all topics at once): {peak_rss_mib(path, 'read_run'):.0f}")
     print(
         f"bench process maxrss MiB: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}"
     )

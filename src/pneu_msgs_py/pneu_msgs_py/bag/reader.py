@@ -51,7 +51,15 @@ from .errors import (
 )
 from .mcap_file import CorruptBagError, McapFile, walk_offsets
 
-__all__ = ["RunData", "TopicArrays", "read_run", "bag_files", "KNOWN_TYPES", "CorruptBagError"]
+__all__ = [
+    "RunData",
+    "TopicArrays",
+    "read_run",
+    "iter_run",
+    "bag_files",
+    "KNOWN_TYPES",
+    "CorruptBagError",
+]
 
 KNOWN_TYPES = (*FIXED_TYPES, "diagnostic_msgs/msg/DiagnosticArray")
 
@@ -158,80 +166,227 @@ def bag_files(path: str | os.PathLike) -> tuple[list[Path], list[str]]:
     return [p], warn
 
 
-class _Collector:
-    """Pieces of one topic across chunks and files."""
+def _all_equal(v: np.ndarray, c) -> bool:
+    """Every element equals ``c`` (NaN equals NaN)."""
+    if c != c:  # NaN
+        return bool(np.isnan(v).all())
+    return bool((v == c).all())
 
-    def __init__(self, topic: str, ros_type: str, qos: list[QosProfile]) -> None:
+
+class _Column:
+    """A growing column that stays a single value while the data allow (no memory)."""
+
+    __slots__ = ("arr", "cap", "const", "dtype", "has_const", "n")
+
+    def __init__(self, dtype, capacity: int, n: int = 0, fill=None) -> None:
+        self.dtype = np.dtype(dtype)
+        self.cap = max(int(capacity), 16)
+        self.n = n
+        self.arr: np.ndarray | None = None
+        self.const = fill
+        self.has_const = n > 0
+
+    def _materialize(self, need: int) -> None:
+        self.cap = max(self.cap, need)
+        arr = np.empty(self.cap, dtype=self.dtype)
+        if self.n:
+            arr[: self.n] = self.const
+        self.arr = arr
+
+    def _ensure(self, need: int) -> None:
+        if need > self.cap:
+            self.cap = max(need, 2 * self.cap)
+            arr = np.empty(self.cap, dtype=self.dtype)
+            arr[: self.n] = self.arr[: self.n]
+            self.arr = arr
+
+    def append(self, v: np.ndarray) -> None:
+        k = len(v)
+        if not k:
+            return
+        if self.arr is None:
+            if not self.has_const:
+                c = v[0]
+                if _all_equal(v, c):
+                    self.const, self.has_const = c, True
+                    self.n += k
+                    return
+            elif _all_equal(v, self.const):
+                self.n += k
+                return
+            self._materialize(self.n + k)
+        self._ensure(self.n + k)
+        self.arr[self.n : self.n + k] = v
+        self.n += k
+
+    def append_const(self, c, k: int) -> None:
+        if self.arr is None and (
+            not self.has_const or self.const == c or (c != c and self.const != self.const)
+        ):
+            self.const, self.has_const = c, True
+            self.n += k
+            return
+        if self.arr is None:
+            self._materialize(self.n + k)
+        self._ensure(self.n + k)
+        self.arr[self.n : self.n + k] = c
+        self.n += k
+
+    def result(self) -> np.ndarray:
+        """The column; a read-only broadcast view if it held one value throughout."""
+        if self.arr is None:
+            return np.broadcast_to(np.asarray(self.const, dtype=self.dtype), (self.n,))
+        out = self.arr[: self.n]
+        if self.cap > self.n + self.n // 8:
+            out = out.copy()  # do not keep a large unused capacity alive
+        self.arr = None
+        return out
+
+
+class _TimeColumn:
+    """An int64 time column that is stored only if it differs from the log time."""
+
+    __slots__ = ("base", "col", "n")
+
+    def __init__(self, base: _Column) -> None:
+        self.base = base
+        self.col: _Column | None = None
+        self.n = 0
+
+    def append(self, v: np.ndarray, base_chunk: np.ndarray) -> None:
+        if self.col is None:
+            if np.array_equal(v, base_chunk):
+                self.n += len(v)
+                return
+            col = _Column(np.int64, self.base.cap)
+            if self.n:
+                col.arr = np.empty(col.cap, dtype=np.int64)
+                col.arr[: self.n] = (
+                    self.base.arr[: self.n] if self.base.arr is not None else self.base.const
+                )
+                col.n = self.n
+            self.col = col
+        self.col.append(v)
+        self.n += len(v)
+
+
+def _merge_pieces(pieces: list[Piece]) -> Piece:
+    """Several pieces of one chunk and channel -> one, in message-index order."""
+    key = np.concatenate([p.order_key for p in pieces])
+    order = np.argsort(key, kind="stable")
+    keys: list[str] = []
+    names: list[str] = []
+    for p in pieces:
+        keys += [k for k in p.fields if k not in keys]
+        names += [nm for nm in p.names if nm not in names]
+    fields = {
+        k: np.concatenate([p.fields.get(k, np.full(len(p), np.nan)) for p in pieces])[order]
+        for k in keys
+    }
+    frames = [
+        fr
+        for p in pieces
+        for fr in (p.frame_ids if len(p.frame_ids) == len(p) else p.frame_ids * len(p))
+    ]
+    objects = None
+    if any(p.objects is not None for p in pieces):
+        objs = [o for p in pieces for o in (p.objects or [None] * len(p))]
+        objects = [objs[i] for i in order]
+    return Piece(
+        np.concatenate([p.log_time for p in pieces])[order],
+        np.concatenate([p.publish_time for p in pieces])[order],
+        np.concatenate([p.stamp for p in pieces])[order],
+        fields,
+        [frames[i] for i in order],
+        tuple(names),
+        objects,
+        key[order],
+    )
+
+
+class _Collector:
+    """One topic's columns, filled chunk by chunk (preallocated from the file's statistics)."""
+
+    def __init__(self, topic: str, ros_type: str, qos: list[QosProfile], capacity: int) -> None:
         self.topic = topic
         self.ros_type = ros_type
         self.qos = qos
-        self.pieces: list[tuple[int, Piece]] = []  # (base key, piece)
+        self.capacity = capacity
+        self.log = _Column(np.int64, capacity)
+        self.pub = _TimeColumn(self.log)
+        self.stamp = _TimeColumn(self.log)
+        self.fields: dict[str, _Column] = {}
+        self.codes = _Column(np.int32, capacity)
+        self.frames: list[str] = []
+        self.names: list[str] = []
+        self.objects: list | None = None
         self.n = 0
-        self.chunks = 0
+        self.sorted = True
+        self.last = None
 
-    def add(self, pieces: list[Piece], n_msgs: int) -> None:
-        for pc in pieces:
-            self.pieces.append((self.n, pc))
-        self.n += n_msgs
-        self.chunks += 1
+    def add(self, pieces: list[Piece]) -> None:
+        if not pieces:
+            return
+        p = pieces[0] if len(pieces) == 1 else _merge_pieces(pieces)
+        k = len(p)
+        if not k:
+            return
+        lt = p.log_time
+        if self.sorted and (
+            (self.last is not None and lt[0] < self.last)
+            or (k > 1 and bool((lt[1:] < lt[:-1]).any()))
+        ):
+            self.sorted = False
+        self.last = int(lt[-1]) if self.last is None else max(self.last, int(lt[-1]))
+        self.log.append(lt)
+        self.pub.append(p.publish_time, lt)
+        self.stamp.append(p.stamp, lt)
+        for nm in p.names:
+            if nm not in self.names:
+                self.names.append(nm)
+        for key, v in p.fields.items():
+            col = self.fields.get(key)
+            if col is None:
+                col = self.fields[key] = _Column(np.float64, self.capacity, self.n, np.nan)
+            col.append(v)
+        for key, col in self.fields.items():
+            if key not in p.fields:
+                col.append_const(np.nan, k)
+        if len(p.frame_ids) == 1:
+            fr = p.frame_ids[0]
+            if fr not in self.frames:
+                self.frames.append(fr)
+            self.codes.append_const(self.frames.index(fr), k)
+        else:
+            for fr in dict.fromkeys(p.frame_ids):
+                if fr not in self.frames:
+                    self.frames.append(fr)
+            idx = {fr: i for i, fr in enumerate(self.frames)}
+            self.codes.append(np.array([idx[f] for f in p.frame_ids], dtype=np.int32))
+        if p.objects is not None:
+            if self.objects is None:
+                self.objects = [None] * self.n
+            self.objects.extend(p.objects)
+        elif self.objects is not None:
+            self.objects.extend([None] * k)
+        self.n += k
 
     def build(self) -> TopicArrays:
-        pcs = [pc for _, pc in self.pieces]
-        if not pcs:
-            z = np.zeros(0, dtype=np.int64)
-            return TopicArrays(self.topic, self.ros_type, z, z, z, {}, (), None, qos=self.qos)
-        log_t = np.concatenate([p.log_time for p in pcs])
-        need_sort = len(pcs) != self.chunks or bool(np.any(np.diff(log_t) < 0))
-        order = None
-        if need_sort:
-            key = np.concatenate([base + p.order_key for base, p in self.pieces])
-            order = np.lexsort((key, log_t))
-
-        def cat(arrs: list[np.ndarray]) -> np.ndarray:
-            a = arrs[0] if len(arrs) == 1 else np.concatenate(arrs)
-            return a if order is None else a[order]
-
-        stamp = cat([p.stamp for p in pcs])
-        pub = cat([p.publish_time for p in pcs])
-        log_t = log_t if order is None else log_t[order]
-        if len(pcs) == 1 and order is None:
-            stamp = pcs[0].stamp
-        # fields: union, NaN where a piece lacks one
-        names: list[str] = []
-        for p in pcs:
-            for nm in p.names:
-                if nm not in names:
-                    names.append(nm)
-        keys: list[str] = []
-        for p in pcs:
-            for k in p.fields:
-                if k not in keys:
-                    keys.append(k)
-        fields: dict[str, np.ndarray] = {}
-        for k in keys:
-            fields[k] = cat(
-                [p.fields[k] if k in p.fields else np.full(len(p), np.nan) for p in pcs]
-            )
-        # frame ids as categorical codes
-        frames: list[str] = []
-        codes = []
-        for p in pcs:
-            ids = []
-            for fr in dict.fromkeys(p.frame_ids):
-                if fr not in frames:
-                    frames.append(fr)
-            if len(p.frame_ids) == 1:
-                codes.append(np.full(len(p), frames.index(p.frame_ids[0]), dtype=np.int32))
-            else:
-                ids = np.array([frames.index(f) for f in p.frame_ids], dtype=np.int32)
-                codes.append(ids)
-        frame_code = cat(codes) if len(frames) > 1 else None
-        objects = None
-        if any(p.objects is not None for p in pcs):
-            objects = [o for p in pcs for o in (p.objects or [])]
-            if order is not None:
-                objects = [objects[i] for i in order]
-        _aliases(self.ros_type, names, fields)
+        log_t = self.log.result()
+        pub = log_t if self.pub.col is None else self.pub.col.result()
+        stamp = log_t if self.stamp.col is None else self.stamp.col.result()
+        fields = {k: c.result() for k, c in self.fields.items()}
+        codes = self.codes.result() if len(self.frames) > 1 else None
+        objects = self.objects
+        if not self.sorted:
+            order = np.argsort(log_t, kind="stable")
+            log_t = log_t[order]
+            pub = log_t if pub is None else pub[order]
+            stamp = stamp[order]
+            fields = {k: v[order] for k, v in fields.items()}
+            codes = None if codes is None else codes[order]
+            objects = None if objects is None else [objects[i] for i in order]
+        _aliases(self.ros_type, self.names, fields)
         return TopicArrays(
             self.topic,
             self.ros_type,
@@ -239,9 +394,9 @@ class _Collector:
             log_t,
             pub,
             fields,
-            tuple(frames),
-            frame_code,
-            tuple(names),
+            tuple(self.frames),
+            codes,
+            tuple(self.names),
             objects,
             self.qos,
         )
@@ -260,7 +415,7 @@ def _aliases(ros_type: str, names: list[str], fields: dict[str, np.ndarray]) -> 
                 fields[k] = fields[f"{names[0]}.{k}"]
 
 
-def _check_channel(path: str, f: McapFile, cid: int) -> tuple[str, str | None]:
+def _check_channel(f: McapFile, cid: int) -> tuple[str, str | None]:
     """(ros type, None) or (type, reason it cannot be decoded)."""
     ch = f.channels[cid]
     sch = f.schemas.get(ch.schema_id)
@@ -275,16 +430,20 @@ def _check_channel(path: str, f: McapFile, cid: int) -> tuple[str, str | None]:
     return sch.name, None
 
 
-def _read_file(
-    path: Path,
-    want: set[str] | None,
-    collectors: dict[str, _Collector],
-    metadata: dict[str, dict[str, str]],
-    warn: list[str],
-    skipped: dict[str, str],
-    seen_topics: set[str],
-) -> bool:
-    """Read one MCAP file into the collectors; return True if it was truncated."""
+@dataclass
+class _Ctx:
+    want: set[str] | None
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    warn: list[str] = field(default_factory=list)
+    skipped: dict[str, str] = field(default_factory=dict)
+    seen: set[str] = field(default_factory=set)
+    # topic -> (ros type, qos, capacity hint)
+    topics: dict[str, tuple[str, list[QosProfile], int]] = field(default_factory=dict)
+    truncated: list[str] = field(default_factory=list)
+
+
+def _file_chunks(path: Path, ctx: _Ctx) -> Iterator[list[tuple[str, list[Piece]]]]:
+    """Per chunk of one MCAP file: [(topic, pieces)] of the wanted, decodable channels."""
     with McapFile(path) as f:
         decoders: dict[int, ChannelDecoder | None] = {}
 
@@ -294,28 +453,33 @@ def _read_file(
             ch = f.channels.get(cid)
             dec = None
             if ch is not None:
-                seen_topics.add(ch.topic)
-                if want is None or ch.topic in want:
-                    ros_type, why = _check_channel(str(path), f, cid)
+                ctx.seen.add(ch.topic)
+                if ctx.want is None or ch.topic in ctx.want:
+                    ros_type, why = _check_channel(f, cid)
                     if why is not None:
-                        if want is not None:
+                        if ctx.want is not None:
                             raise UnknownSchemaError(path, f"topic {ch.topic}: {why}")
-                        skipped[ch.topic] = ros_type
+                        ctx.skipped[ch.topic] = ros_type
                     else:
-                        col = collectors.get(ch.topic)
-                        if col is None:
-                            qos = []
+                        known = ctx.topics.get(ch.topic)
+                        count = (f.message_counts or {}).get(cid, 0)
+                        if known is None:
+                            qos: list[QosProfile] = []
                             try:
                                 qos = parse_offered_qos_yaml(
                                     ch.metadata.get("offered_qos_profiles", "")
                                 )
                             except Exception:
-                                warn.append(f"{path}: {ch.topic}: unreadable offered_qos_profiles")
-                            collectors[ch.topic] = _Collector(ch.topic, ros_type, qos)
-                        elif col.ros_type != ros_type:
+                                ctx.warn.append(
+                                    f"{path}: {ch.topic}: unreadable offered_qos_profiles"
+                                )
+                            ctx.topics[ch.topic] = (ros_type, qos, count)
+                        elif known[0] != ros_type:
                             raise UnknownSchemaError(
-                                path, f"topic {ch.topic} has types {col.ros_type} and {ros_type}"
+                                path, f"topic {ch.topic} has types {known[0]} and {ros_type}"
                             )
+                        else:
+                            ctx.topics[ch.topic] = (known[0], known[1], known[2] + count)
                         dec = ChannelDecoder(ros_type)
             decoders[cid] = dec
             return dec
@@ -326,22 +490,42 @@ def _read_file(
             offsets = chunk.offsets
             if offsets is None:
                 offsets = walk_offsets(chunk.data)
+            out = []
             for cid, offs in offsets.items():
                 dec = decoder(cid)
                 if dec is None:
                     if cid not in f.channels:
-                        warn.append(f"{path}: messages on unknown channel id {cid} skipped")
+                        ctx.warn.append(f"{path}: messages on unknown channel id {cid} skipped")
                     continue
                 ch = f.channels[cid]
                 try:
-                    pieces = dec.decode(chunk.data, offs)
+                    out.append((ch.topic, dec.decode(chunk.data, offs)))
                 except CdrDecodeError as e:
                     raise CorruptBagError(path, f"topic {ch.topic}: {e}") from None
-                collectors[ch.topic].add(pieces, len(offs))
+            yield out
         for name, md in f.metadata.items():  # after the scan: it finds them as it goes
-            metadata.setdefault(name, {}).update(md)
-        warn.extend(f"{path}: {w}" for w in f.warnings)
-        return f.truncated
+            ctx.metadata.setdefault(name, {}).update(md)
+        ctx.warn.extend(f"{path}: {w}" for w in f.warnings)
+        if f.truncated:
+            ctx.truncated.append(str(path))
+
+
+def _finish(path, ctx: _Ctx, collectors: dict[str, _Collector], strict: bool) -> RunData:
+    if strict and ctx.truncated:
+        raise TruncatedBagError(ctx.truncated[0], "file is truncated (strict mode)")
+    if ctx.want is not None:
+        missing = sorted(ctx.want - ctx.seen)
+        if missing:
+            raise MissingTopicError(
+                path, f"topic(s) {', '.join(missing)} not in bag; has {', '.join(sorted(ctx.seen))}"
+            )
+    out = {t: c.build() for t, c in collectors.items()}
+    return RunData(ctx.metadata, out, ctx.warn, str(path), ctx.skipped)
+
+
+def _emit_warnings(ws: list[str]) -> None:
+    for w in ws:
+        warnings.warn(w, TruncatedBagWarning if "truncated" in w else UserWarning, stacklevel=3)
 
 
 def read_run(
@@ -356,6 +540,10 @@ def read_run(
         are listed in ``RunData.skipped``)
     strict : raise :class:`TruncatedBagError` instead of warning on a truncated file
 
+    Columns that hold one value throughout (a variance of 0, a NaN observer
+    state) are returned as read-only broadcast views, and ``stamp_ns`` /
+    ``publish_time_ns`` are the ``log_time_ns`` array itself when equal to it.
+
     Raises
     ------
     NotMcapError, NotRos2Error, TruncatedBagError, MissingTopicError,
@@ -363,32 +551,83 @@ def read_run(
         all subclasses of :class:`BagError`; ``str(err)`` is one line naming the file.
     """
     files, warn = bag_files(path)
-    want = None if topics is None else set(topics)
+    ctx = _Ctx(None if topics is None else set(topics), warn=warn)
     collectors: dict[str, _Collector] = {}
-    metadata: dict[str, dict[str, str]] = {}
-    skipped: dict[str, str] = {}
-    seen: set[str] = set()
     for fpath in files:
-        truncated = _read_file(fpath, want, collectors, metadata, warn, skipped, seen)
-        if truncated:
-            if strict:
-                raise TruncatedBagError(fpath, "file is truncated (strict mode)")
-    if want is not None:
-        missing = sorted(want - seen)
-        if missing:
-            raise MissingTopicError(
-                path, f"topic(s) {', '.join(missing)} not in bag; has {', '.join(sorted(seen))}"
-            )
-    out = {t: c.build() for t, c in collectors.items()}
-    total = sum(len(a) for a in out.values())
-    if total == 0:
-        if any("truncated" in w for w in warn):
+        for results in _file_chunks(fpath, ctx):
+            for topic, pieces in results:
+                col = collectors.get(topic)
+                if col is None:
+                    ros_type, qos, cap = ctx.topics[topic]
+                    col = collectors[topic] = _Collector(topic, ros_type, qos, cap)
+                col.add(pieces)
+        for topic, (ros_type, qos, _cap) in ctx.topics.items():
+            if topic not in collectors:  # a channel without messages
+                collectors[topic] = _Collector(topic, ros_type, qos, 0)
+    data = _finish(path, ctx, collectors, strict)
+    if data.message_count == 0:
+        if ctx.truncated:
             raise TruncatedBagError(path, "file is truncated before its first complete chunk")
-        what = "on the requested topics" if want is not None else "at all"
+        what = "on the requested topics" if ctx.want is not None else "at all"
         raise EmptyBagError(path, f"bag holds no messages {what}")
-    for w in warn:
-        warnings.warn(w, TruncatedBagWarning if "truncated" in w else UserWarning, stacklevel=2)
-    return RunData(metadata, out, warn, str(path), skipped)
+    _emit_warnings(data.warnings)
+    return data
+
+
+def iter_run(
+    path: str | os.PathLike,
+    topics: Iterable[str] | None = None,
+    *,
+    batch_chunks: int = 32,
+    strict: bool = False,
+) -> Iterator[RunData]:
+    """Stream a run in batches of ``batch_chunks`` chunks (bounded memory).
+
+    Each batch is a :class:`RunData` for the messages of those chunks, in
+    log-time order within the batch; batches follow the file order. The last
+    batch carries the metadata and warnings. Same errors as :func:`read_run`.
+    """
+    files, warn = bag_files(path)
+    ctx = _Ctx(None if topics is None else set(topics), warn=warn)
+    collectors: dict[str, _Collector] = {}
+    total = 0
+    n_chunks = 0
+    pending = None
+    for fpath in files:
+        for results in _file_chunks(fpath, ctx):
+            for topic, pieces in results:
+                col = collectors.get(topic)
+                if col is None:
+                    ros_type, qos, _cap = ctx.topics[topic]
+                    col = collectors[topic] = _Collector(topic, ros_type, qos, 1024 * batch_chunks)
+                col.add(pieces)
+            n_chunks += 1
+            if n_chunks % batch_chunks == 0:
+                if pending is not None:
+                    yield pending
+                pending = RunData({}, {t: c.build() for t, c in collectors.items()}, [], str(path))
+                total += pending.message_count
+                collectors = {}
+    last = _finish(path, ctx, collectors, strict)
+    total += last.message_count
+    if pending is not None:
+        if last.message_count:
+            yield pending
+            pending = last
+        else:
+            pending.metadata, pending.warnings, pending.skipped = (
+                last.metadata,
+                last.warnings,
+                last.skipped,
+            )
+    else:
+        pending = last
+    if total == 0:
+        if ctx.truncated:
+            raise TruncatedBagError(path, "file is truncated before its first complete chunk")
+        raise EmptyBagError(path, "bag holds no messages")
+    _emit_warnings(pending.warnings)
+    yield pending
 
 
 def iter_topic_names(path: str | os.PathLike) -> Iterator[tuple[str, str]]:

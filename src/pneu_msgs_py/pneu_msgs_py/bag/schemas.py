@@ -10,7 +10,14 @@ suite checks them byte for byte against the rosbags Jazzy typestore.
 
 from __future__ import annotations
 
-__all__ = ["MSG_DEFINITIONS", "SCHEMA_ENCODING", "MESSAGE_ENCODING", "PROFILE", "msgdef"]
+__all__ = [
+    "MSG_DEFINITIONS",
+    "TYPE_HASHES",
+    "SCHEMA_ENCODING",
+    "MESSAGE_ENCODING",
+    "PROFILE",
+    "msgdef",
+]
 
 PROFILE = "ros2"
 SCHEMA_ENCODING = "ros2msg"
@@ -94,4 +101,22 @@ MSG_DEFINITIONS: dict[str, str] = {
         "rosgraph_msgs/msg/Clock",
         "diagnostic_msgs/msg/DiagnosticArray",
     )
+}
+
+
+#: RIHS01 type description hashes (REP 2011) of the Jazzy types, as rosbag2 stores them in
+#: the channel metadata ``topic_type_hash``; checked against rosbags' ``hash_rihs01``.
+TYPE_HASHES: dict[str, str] = {
+    "sensor_msgs/msg/FluidPressure": (
+        "RIHS01_22dfb2b145a0bd5a31a1ac3882a1b32148b51d9b2f3bab250290d66f3595bc32"
+    ),
+    "sensor_msgs/msg/JointState": (
+        "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e"
+    ),
+    "rosgraph_msgs/msg/Clock": (
+        "RIHS01_692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564"
+    ),
+    "diagnostic_msgs/msg/DiagnosticArray": (
+        "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e"
+    ),
 }

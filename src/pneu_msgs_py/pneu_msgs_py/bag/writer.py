@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from ..convert import DiagStatus, _typestore, fill_diagnostic_array
-from ..qos import MODES, offered_qos_yaml
+from ..convert import DiagStatus, _typestore, diagnostics_to_typestore
+from ..qos import MODES, QosProfile, offered_qos_yaml
 from ..samples import AXES, SensorSample
 from ..topics import (
     CLOCK_TOPIC,
@@ -49,7 +49,7 @@ from ..topics import (
 from . import mcap_records as R
 from .cdr import FixedLayout, clock_layout, fluid_pressure_layout, joint_state_layout
 from .errors import BagWriteError
-from .schemas import MESSAGE_ENCODING, MSG_DEFINITIONS, PROFILE, SCHEMA_ENCODING
+from .schemas import MESSAGE_ENCODING, MSG_DEFINITIONS, PROFILE, SCHEMA_ENCODING, TYPE_HASHES
 
 __all__ = ["BagWriter", "DiagStatus", "COMPRESSIONS"]
 
@@ -64,7 +64,7 @@ class _Channel:
     topic: str
     ros_type: str
     schema_id: int
-    qos_yaml: str
+    qos: QosProfile
     record: bytes = b""
     emitted: bool = False
     seq: int = 0
@@ -265,9 +265,14 @@ class BagWriter:
             )
         sid = self._schemas[ros_type][0]
         cid = len(self._channels) + 1
-        qos_yaml = offered_qos_yaml([qos_for(topic, self.qos_mode)])
-        ch = _Channel(cid, topic, ros_type, sid, qos_yaml)
-        ch.record = R.channel(cid, sid, topic, MESSAGE_ENCODING, {"offered_qos_profiles": qos_yaml})
+        qos = qos_for(topic, self.qos_mode)
+        ch = _Channel(cid, topic, ros_type, sid, qos)
+        # the two channel metadata keys rosbag2 (Jazzy) writes
+        meta = {
+            "offered_qos_profiles": offered_qos_yaml([qos]),
+            "topic_type_hash": TYPE_HASHES.get(ros_type, ""),
+        }
+        ch.record = R.channel(cid, sid, topic, MESSAGE_ENCODING, meta)
         self._channels[topic] = ch
         return ch
 
@@ -340,22 +345,7 @@ class BagWriter:
         """``/diagnostics`` (low rate; encoded with the rosbags Jazzy typestore)."""
         self._check_open()
         ts = _typestore()
-        T = ts.types
-        msg = T["diagnostic_msgs/msg/DiagnosticArray"](
-            header=T["std_msgs/msg/Header"](
-                stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""
-            ),
-            status=[],
-        )
-        fill_diagnostic_array(
-            msg,
-            lambda: T["diagnostic_msgs/msg/DiagnosticStatus"](
-                level=0, name="", message="", hardware_id="", values=[]
-            ),
-            lambda: T["diagnostic_msgs/msg/KeyValue"](key="", value=""),
-            stamp_ns,
-            statuses,
-        )
+        msg = diagnostics_to_typestore(stamp_ns, statuses)
         data = bytes(ts.serialize_cdr(msg, "diagnostic_msgs/msg/DiagnosticArray"))
         self.write_serialized(
             DIAGNOSTICS_TOPIC, "diagnostic_msgs/msg/DiagnosticArray", data, stamp_ns, stamp_ns
@@ -556,6 +546,10 @@ class BagWriter:
                     self._schemas[ch.ros_type] = (sid, b"")
                 self._write(ch.record)
                 ch.emitted = True
+        rec = R.metadata("rosbag2", {"serialized_metadata": self._rosbag2_metadata()})
+        self._metadata_indexes.append(R.metadata_index(self._pos, len(rec), "rosbag2"))
+        self._n_metadata += 1
+        self._write(rec)
         self._write(R.data_end(self._crc))
         summary_start = self._pos
         summary_crc = 0
@@ -607,6 +601,54 @@ class BagWriter:
         summary_crc = zlib.crc32(foot, summary_crc)
         self._f.write(foot + summary_crc.to_bytes(4, "little") + R.MAGIC)
         self._f.flush()
+
+    def _rosbag2_metadata(self) -> str:
+        """rosbag2's BagMetadata (version 9) as the ``rosbag2`` metadata record holds it.
+
+        ``ros2 bag info/play`` on the loose file read the version from it (so the
+        string-coded QoS profiles are decoded as version 9) and take counts,
+        times and topics from the summary statistics.
+        """
+        import yaml
+
+        start = self._t_start or 0
+        duration = (self._t_end or 0) - start
+        count = sum(ch.count for ch in self._channels.values())
+        info = {
+            "version": 9,
+            "storage_identifier": "mcap",
+            "duration": {"nanoseconds": duration},
+            "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": count,
+            "topics_with_message_count": [
+                {
+                    "topic_metadata": {
+                        "name": ch.topic,
+                        "type": ch.ros_type,
+                        "serialization_format": MESSAGE_ENCODING,
+                        "offered_qos_profiles": [ch.qos.to_dict()],
+                        "type_description_hash": TYPE_HASHES.get(ch.ros_type, ""),
+                    },
+                    "message_count": ch.count,
+                }
+                for ch in self._channels.values()
+            ],
+            # chunk compression belongs to the storage; rosbag2's own (file/message) is off
+            "compression_format": "",
+            "compression_mode": "",
+            "relative_file_paths": [self.path.name],
+            "files": [
+                {
+                    "path": self.path.name,
+                    "starting_time": {"nanoseconds_since_epoch": start},
+                    "duration": {"nanoseconds": duration},
+                    "message_count": count,
+                }
+            ],
+            "custom_data": {"writer": _LIBRARY},
+            "ros_distro": "jazzy",
+        }
+        return yaml.safe_dump(info, sort_keys=False, default_flow_style=False)
 
 
 def _merge_same_channel(batches: list[_Batch]) -> _Batch:
