@@ -219,3 +219,16 @@ def test_diagnostics_round_trip():
         DiagStatus(4, "x")
     with pytest.raises(TypeError, match="must be str"):
         DiagStatus(0, "x", values={"n": 3})
+
+
+def test_sample_to_values_matches_the_writer_layout():
+    from pneu_msgs_py.convert import fill_joint_state, sample_to_values, typestore_messages
+
+    vals = sample_to_values(SAMPLE)
+    assert vals["/pneu/pressure/motor_in"] == ("motor_in", [], [SAMPLE.p_m1], [])
+    frame, names, pos, vel = vals["/pneu/rotary/joint_state"]
+    ts = typestore_messages()
+    msg = sample_to_typestore(SAMPLE)["/pneu/rotary/joint_state"]
+    fill_joint_state(msg, SAMPLE.stamp_ns, names, pos, vel, frame_id=frame, array=np.asarray)
+    L = joint_state_layout(["rotary", "rotary_counts"], position=True, velocity=True)
+    assert bytes(ts.serialize_cdr(msg, msg.__msgtype__)) == L.encode(SAMPLE.stamp_ns, pos + vel)

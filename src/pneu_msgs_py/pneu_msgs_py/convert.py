@@ -36,6 +36,7 @@ __all__ = [
     "controller_state_from_msg",
     "diag_statuses_from_msg",
     "fill_sensor_joint_states",
+    "sample_to_values",
     "typestore_messages",
     "sample_to_typestore",
     "command_to_typestore",
@@ -188,6 +189,27 @@ def fill_diagnostic_array(
         out.append(m)
     msg.status = out
     return msg
+
+
+def sample_to_values(
+    s: SensorSample,
+) -> dict[str, tuple[str, list[str], list[float], list[float]]]:
+    """Per sensor topic of a sample: (frame_id, names, position, velocity).
+
+    Pressures have no names and their value in ``position[0]``; joint states
+    are laid out as the topic table says (rotary: counts as a second joint).
+    """
+    out: dict[str, tuple[str, list[str], list[float], list[float]]] = {}
+    for topic, (attr, frame) in PRESSURE_TOPICS.items():
+        out[topic] = (frame, [], [getattr(s, attr)], [])
+    out[JOINT_STATE_TOPIC["linear"]] = ("", ["linear"], [s.x], [])
+    out[JOINT_STATE_TOPIC["rotary"]] = (
+        "",
+        ["rotary", ROTARY_COUNTS_JOINT],
+        [s.theta, float(s.counts)],
+        [s.omega, math.nan],
+    )
+    return out
 
 
 def sample_from_msgs(
