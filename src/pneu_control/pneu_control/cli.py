@@ -25,6 +25,7 @@ SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("plot", "pneu_control.cli_plot"),
     ("compare", "pneu_control.cli_compare"),
     ("replay", "pneu_control.cli_replay"),
+    ("tune", "pneu_control.cli_tune"),
     ("bench", "pneu_control.cli_bench"),
 )
 

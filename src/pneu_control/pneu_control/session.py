@@ -25,8 +25,17 @@ __all__ = ["build_spec", "execute", "parse_reference", "parse_sets", "window_for
 
 
 def parse_value(text: str) -> Any:
-    """A CLI value as YAML would read it (``1`` int, ``1.0`` float, ``pid`` str)."""
-    return yaml.safe_load(text)
+    """A CLI value as YAML would read it (``1`` int, ``1.0`` float, ``pid`` str).
+
+    YAML 1.1 reads ``3e5`` as a string; a user means the number.
+    """
+    value = yaml.safe_load(text)
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
 
 
 def parse_sets(items: Iterable[str], axes: tuple[str, ...]) -> dict[str, dict[str, Any]]:
