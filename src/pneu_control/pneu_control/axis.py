@@ -168,6 +168,7 @@ class AxisController:
         self._t0_ns: int | None = None
         self._started = False
         self._u_hist = [self._neutral] * (self._delay + 1)  # V, oldest first
+        self._alg.pending = self._u_hist
         self._u_last = self._neutral
         self._blend = 0.0  # V, decaying bumpless offset
         self._t = 0.0
@@ -256,6 +257,7 @@ class AxisController:
         params, ref, new_alg = self._pending  # new_alg: a fresh instance, no shared state
         self._pending = None
         self._commit((params, ref, new_alg))
+        new_alg.pending = self._u_hist
         # the reference may have changed: re-evaluate at this sample's time
         k = self._scale
         r_si, rd_si, rdd_si = ref(self._t)

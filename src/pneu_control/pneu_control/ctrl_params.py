@@ -108,6 +108,11 @@ class LadrcParams:
     accel_feedforward: bool = param(
         False, desc="add the TD's reference acceleration v3 to u0 (not in the paper)"
     )
+    delay_compensation: bool = param(
+        False,
+        desc="predict the ESO state over the transport delay with the commands already sent "
+        "and act on the prediction (not in the paper)",
+    )
 
 
 @dataclass(frozen=True)
@@ -149,7 +154,13 @@ class EsoSmcParams:
         source="paper (k·Δ = 0.05: discontinuous, see errata)",
     )
     integral_anti_windup: bool = param(
-        True, desc="freeze ∫e while the valve command is saturated in the error's direction"
+        True,
+        desc="freeze ∫e while e pushes further into a saturation (valve command, or |s| > Δ)",
+    )
+    delay_compensation: bool = param(
+        False,
+        desc="predict the ESO state over the transport delay with the commands already sent "
+        "and act on the prediction (not in the paper)",
     )
     friction_compensation: bool = param(
         False,

@@ -26,7 +26,10 @@ Per sample the controller calls exactly one of
 Both return the saturated deviation and leave readable attributes:
 ``z1, z2, z3`` (observer states, NaN if none), ``s`` (sliding variable, NaN
 if none), ``u_raw`` (unsaturated deviation) and ``hint`` (its estimates
-(y, ẏ, ÿ), handed to the next algorithm on a switch).
+(y, ẏ, ÿ), handed to the next algorithm on a switch). ``pending`` is the
+controller's command history in V, oldest first (the command on the valve
+during the last period, then the d commands in the transport pipeline); the
+controller attaches it and updates it in place.
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ class Algorithm(Protocol):
     z3: float
     s: float
     u_raw: float
+    pending: list[float]
 
     @property
     def hint(self) -> tuple[float, float, float]: ...

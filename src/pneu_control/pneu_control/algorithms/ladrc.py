@@ -44,6 +44,11 @@ class Ladrc:
         lim = params.limits
         self.lo = lim.u_min - lim.u_neutral
         self.hi = lim.u_max - lim.u_neutral
+        # delay compensation: the controller attaches its command history (V, oldest first)
+        self.dc = p.delay_compensation and params.transport_delay_samples > 0
+        self.tau = params.transport_delay_samples * T
+        self.u_n = lim.u_neutral
+        self.pending: list[float] = [lim.u_neutral] * (params.transport_delay_samples + 1)
         self.z1 = self.z2 = self.z3 = 0.0
         self.s = NAN
         self.u_raw = 0.0
@@ -78,6 +83,16 @@ class Ladrc:
         z2 = z2p + self.l2 * ey
         z3 = z3 + self.l3 * ey
         self.z1, self.z2, self.z3 = z1, z2, z3
+        if self.dc:  # act on the state the command will meet: t + d T (see eso_smc)
+            T2h, b0, u_n = self.T2h, self.b0, self.u_n
+            pend = self.pending
+            for i in range(1, len(pend)):
+                acc = z3 + b0 * (pend[i] - u_n)
+                z1 += T * z2 + T2h * acc
+                z2 += T * acc
+            tau = self.tau
+            r += tau * r_dot + 0.5 * tau * tau * r_ddot
+            r_dot += tau * r_ddot
         u0 = self.kp * (r - z1) + self.kd * (r_dot - z2) + self.ff * r_ddot
         u = (u0 - z3) / self.b0
         self.u_raw = u

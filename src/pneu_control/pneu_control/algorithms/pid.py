@@ -50,6 +50,7 @@ class Pid:
         self.d = 0.0
         self.y_f = 0.0
         self.r_dot = 0.0
+        self.pending: list[float] = []  # command history (unused by PID)
 
     @property
     def hint(self) -> tuple[float, float, float]:
