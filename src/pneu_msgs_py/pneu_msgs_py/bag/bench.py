@@ -39,6 +39,7 @@ __all__ = [
     "analyze_msgs_per_s",
     "baseline_msgs_per_s",
     "peak_rss_mib",
+    "analysis_figures",
 ]
 
 PERIOD_NS = 1_000_000
@@ -221,7 +222,8 @@ def baseline_msgs_per_s(path: str | os.PathLike, max_messages: int = 300_000) ->
             if n >= max_messages:
                 break
     for lst in acc.values():
-        np.mean(lst)
+        if lst:
+            np.mean(lst)
     return n / (time.perf_counter() - t0)
 
 
@@ -231,9 +233,45 @@ def peak_rss_mib(path: str | os.PathLike, what: str = "analyze") -> float:
         "analyze": f"from pneu_msgs_py.bag.bench import analyze; analyze({str(path)!r})",
         "read_run": f"from pneu_msgs_py.bag.reader import read_run; read_run({str(path)!r})",
     }[what]
-    code = f"import resource\n{call}\nprint(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+    # VmHWM (peak RSS of this process image); ru_maxrss would carry the parent's over exec
+    code = (
+        f"{call}\n"
+        "import re, resource\n"
+        "try:\n"
+        "    txt = open('/proc/self/status').read()\n"
+        "    print(int(re.search(r'VmHWM:\\s+(\\d+)', txt).group(1)))\n"
+        "except OSError:\n"
+        "    print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return int(out.stdout.strip().splitlines()[-1]) / 1024
+
+
+def analysis_figures(
+    minutes: float = 10.0, baseline_messages: int = 300_000, directory: str | None = None
+) -> dict[str, float]:
+    """All bag figures on a synthetic ``minutes``-long both-axes 1 kHz run (for ``pneu bench``).
+
+    Keys: ``write_us_per_cycle``, ``analyze_msgs_per_s``, ``baseline_msgs_per_s``
+    (rosbags, first ``baseline_messages`` messages), ``analyze_vs_baseline``,
+    ``analyze_peak_rss_mib`` (streamed analysis, child process),
+    ``read_run_peak_rss_mib`` (all topics at once), ``bag_mib``, ``bag_messages``.
+    """
+    out: dict[str, float] = {"write_us_per_cycle": write_us_per_cycle(directory=directory)}
+    with tempfile.TemporaryDirectory(dir=directory) as d:
+        path = Path(d) / "bench.mcap"
+        write_synthetic_run(path, int(minutes * 60_000))
+        out["bag_minutes"] = minutes
+        out["bag_mib"] = path.stat().st_size / 2**20
+        t0 = time.perf_counter()
+        n, _ = analyze(path)
+        out["analyze_msgs_per_s"] = n / (time.perf_counter() - t0)
+        out["bag_messages"] = n
+        out["baseline_msgs_per_s"] = baseline_msgs_per_s(path, baseline_messages)
+        out["analyze_vs_baseline"] = out["analyze_msgs_per_s"] / out["baseline_msgs_per_s"]
+        out["analyze_peak_rss_mib"] = peak_rss_mib(path, "analyze")
+        out["read_run_peak_rss_mib"] = peak_rss_mib(path, "read_run")
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

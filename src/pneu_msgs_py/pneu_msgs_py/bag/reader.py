@@ -272,6 +272,8 @@ class _TimeColumn:
 
 def _merge_pieces(pieces: list[Piece]) -> Piece:
     """Several pieces of one chunk and channel -> one, in message-index order."""
+    # pieces in order of their first message, so names and fields are first-seen ordered
+    pieces = sorted(pieces, key=lambda p: int(p.order_key.min()) if len(p) else 0)
     key = np.concatenate([p.order_key for p in pieces])
     order = np.argsort(key, kind="stable")
     keys: list[str] = []
