@@ -7,6 +7,8 @@ import sys
 import time
 from pathlib import Path
 
+from pneu_msgs_py.paths import config_dir
+
 from . import paper, session
 from .experiments import PAPER_EXPERIMENTS, Experiment
 from .plots import Series, plot_runs
@@ -21,7 +23,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
-    p.add_argument("--controllers", default=None, metavar="FILE", help="controllers.yaml")
+    p.add_argument(
+        "--config-dir",
+        default=None,
+        metavar="DIR",
+        help="directory with controllers.yaml and controllers_retuned.yaml (default: config/)",
+    )
     p.add_argument("--no-plots", action="store_true")
 
 
@@ -48,21 +55,23 @@ def run(args: argparse.Namespace) -> int:
     plant = load_plant(args.plant)
     results: dict[tuple[str, str], object] = {}
 
-    def runner(exp: Experiment, controller: str, run_dir: Path):
+    cfg = Path(args.config_dir) if args.config_dir else config_dir()
+
+    def runner(exp: Experiment, controller: str, gains: str, run_dir: Path):
         spec = session.build_spec(
             axes=(exp.axis,),
             controller=controller,
             reference=dict(exp.reference),
             duration_s=exp.duration_s,
             seed=args.seed,
-            controllers_file=args.controllers,
+            controllers_file=cfg / paper.GAIN_SETS[gains],
             plant=plant,
-            name=f"{exp.id}/{controller}",
+            name=f"{exp.id}/{controller}/{gains}",
         )
         spec = _with_window(spec, exp)
         result = session.execute(spec, run_dir, bag=True)
         m = session.metrics_from_bag(run_dir / "run.mcap", exp.axis)
-        results[(exp.id, controller)] = (result, m)
+        results[(exp.id, controller, gains)] = (result, m)
         return result, m
 
     t0 = time.perf_counter()
@@ -71,11 +80,17 @@ def run(args: argparse.Namespace) -> int:
     paper.write_table(rows, out, extra={"seed": args.seed})
     if not args.no_plots:
         for exp in PAPER_EXPERIMENTS:
-            series = [
-                _series(results[(exp.id, c)][0], exp, c, results[(exp.id, c)][1])
-                for c in paper.controllers_for(exp)
-            ]
-            plot_runs(series, exp.title, out / f"{exp.id}.png")
+            for gains in paper.GAIN_SETS:
+                keys = [
+                    (exp.id, c, g)
+                    for c, g in paper.runs_for(exp)
+                    if (g == gains) or (gains == "retuned" and c not in exp.controllers)
+                ]
+                series = [
+                    _series(results[k][0], exp, f"{k[1]} ({k[2]} gains)", results[k][1])
+                    for k in keys
+                ]
+                plot_runs(series, f"{exp.title}: {gains} gains", out / f"{exp.id}__{gains}.png")
     print()
     print(paper.render_markdown(rows))
     print(

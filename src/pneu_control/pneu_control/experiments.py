@@ -54,7 +54,7 @@ PAPER_EXPERIMENTS: tuple[Experiment, ...] = (
         title="Constant speed 800 rpm (paper Fig. 12)",
         reference={"reference.kind": "constant", "reference.value": 800.0},
         duration_s=10.0,
-        window=WindowSpec(kind="speed", average_s=0.010),
+        window=WindowSpec(kind="speed", average_s=60.0 / 800.0),  # one revolution
         controllers=("pid", "ladrc", "eso_smc"),
         unit="rpm",
         paper={"pid": (15.0, None), "ladrc": (2.5, None), "eso_smc": (2.0, None)},
@@ -65,7 +65,7 @@ PAPER_EXPERIMENTS: tuple[Experiment, ...] = (
         title="Constant speed 700 rpm, 800 rpm gains (paper Fig. 13)",
         reference={"reference.kind": "constant", "reference.value": 700.0},
         duration_s=10.0,
-        window=WindowSpec(kind="speed", average_s=0.010),
+        window=WindowSpec(kind="speed", average_s=60.0 / 700.0),  # one revolution
         controllers=("eso_smc",),
         unit="rpm",
         # the paper states the band 696–702 rpm: the largest deviation is 4 rpm

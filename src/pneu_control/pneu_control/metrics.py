@@ -12,11 +12,15 @@ The steady-state window T_s depends on the experiment kind:
 - ``fixed``: from a given start time.
 
 Rotary speed is measured from encoder counts per 1 ms, quantised to 15 rpm
-(1000 P/R, X4). The paper's ±2 rpm cannot be read off such samples, so its
-speed figures imply an averaged speed. ``average_s`` (default 10 ms for the
-rotary axis: 1.5 rpm resolution, below every figure the paper reports) sets a
-causal moving average applied to reference and measured alike -- equivalent
-to counting encoder edges over that window. Our choice; the paper is silent.
+(1000 P/R, X4), and the vane motor's torque ripple (Eq. 8, four vanes: 53 Hz
+at 800 rpm) modulates the true speed by about ±15 rpm on the twin. The paper's
+±2 rpm cannot be read off such samples (errata: "the reported ±2 rpm implies
+filtering"). Our choice, stated wherever a figure is printed: the constant-
+speed metrics use the mean speed over one revolution at the reference speed
+(``average_s`` = 60/n_ref: 75 ms at 800 rpm) -- what a tachometer counting
+once per revolution reads; it is a causal moving average of reference and
+measured alike, i.e. encoder edges counted over that window. The paper is
+silent on its speed filter.
 
 Everything here works on SI arrays; :class:`AxisMetrics` converts to the
 report units (mm, rpm) once, at the edge.

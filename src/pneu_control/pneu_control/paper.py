@@ -23,12 +23,16 @@ __all__ = ["IMPROVED", "PaperRow", "paper_rows", "render_markdown", "run_paper"]
 # our controller beyond the paper, run on the experiments it is compared on
 IMPROVED: dict[str, tuple[str, ...]] = {}
 
+# gain sets: the paper's verbatim gains and the re-tuned set (pneu_control.tuning)
+GAIN_SETS: dict[str, str] = {"paper": "controllers.yaml", "retuned": "controllers_retuned.yaml"}
+
 
 @dataclass(frozen=True)
 class PaperRow:
     id: str
     axis: str
     controller: str
+    gains: str
     e_max: float
     rmse: float
     unit: str
@@ -51,20 +55,27 @@ def _ratio(ours: float, paper: float | None) -> float | None:
     return ours / paper
 
 
-def run_dir_name(exp: Experiment, controller: str) -> str:
-    return f"{exp.id}__{controller}"
+def run_dir_name(exp: Experiment, controller: str, gains: str) -> str:
+    return f"{exp.id}__{controller}__{gains}"
 
 
-def controllers_for(exp: Experiment) -> tuple[str, ...]:
-    return exp.controllers + IMPROVED.get(exp.id, ())
+def runs_for(exp: Experiment) -> list[tuple[str, str]]:
+    """(controller, gain set) pairs of one experiment: the paper's controllers with
+    both gain sets, then ours (on the re-tuned set)."""
+    pairs = [(c, g) for g in GAIN_SETS for c in exp.controllers]
+    pairs += [(c, "retuned") for c in IMPROVED.get(exp.id, ())]
+    return pairs
 
 
-def row_from_metrics(exp: Experiment, controller: str, m: AxisMetrics, run_dir: str, band_ok=None):
+def row_from_metrics(
+    exp: Experiment, controller: str, gains: str, m: AxisMetrics, run_dir: str, band_ok=None
+):
     paper = exp.paper.get(controller, (None, None))
     return PaperRow(
         id=exp.id,
         axis=exp.axis,
         controller=controller,
+        gains=gains,
         e_max=m.e_max,
         rmse=m.rmse,
         unit=m.unit,
@@ -80,24 +91,24 @@ def run_paper(
     out_dir: str | Path,
     *,
     seed: int = 0,
-    runner: Callable[[Experiment, str, Path], tuple[RunResult, AxisMetrics]],
+    runner: Callable[[Experiment, str, str, Path], tuple[RunResult, AxisMetrics]],
     log: Callable[[str], None] = print,
 ) -> list[PaperRow]:
     """Run every experiment × controller with ``runner`` and collect rows."""
     out = Path(out_dir)
     rows: list[PaperRow] = []
     for exp in PAPER_EXPERIMENTS:
-        for controller in controllers_for(exp):
-            run_dir = out / run_dir_name(exp, controller)
-            result, m = runner(exp, controller, run_dir)
+        for controller, gains in runs_for(exp):
+            run_dir = out / run_dir_name(exp, controller, gains)
+            result, m = runner(exp, controller, gains, run_dir)
             band_ok = None
             if exp.band is not None:
                 band_ok = _in_band(result, exp, m)
-            row = row_from_metrics(exp, controller, m, run_dir.name, band_ok)
+            row = row_from_metrics(exp, controller, gains, m, run_dir.name, band_ok)
             rows.append(row)
             log(
-                f"  {exp.id:18s} {controller:14s} e_max {m.e_max:8.4f} {m.unit:3s} "
-                f"RMSE {m.rmse:8.4f} {m.unit:3s} ({result.rtf:.0f}x real time)"
+                f"  {exp.id:18s} {controller:12s} {gains:8s} e_max {m.e_max:9.4f} {m.unit:3s} "
+                f"RMSE {m.rmse:9.4f} {m.unit:3s} ({result.rtf:.0f}x real time)"
             )
     return rows
 
@@ -127,8 +138,9 @@ def _fmt(x: float | None, digits: int = 3) -> str:
 
 def render_markdown(rows: list[PaperRow]) -> str:
     lines = [
-        "| experiment | controller | e_max | paper e_max | ratio | RMSE | paper RMSE | ratio | window (s) |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| experiment | controller | gains | e_max | paper e_max | ratio | RMSE | paper RMSE | ratio "
+        "| window (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         d = r.to_dict()
@@ -136,7 +148,7 @@ def render_markdown(rows: list[PaperRow]) -> str:
         if r.in_band is not None:
             band = " (in 696–702 band)" if r.in_band else " (leaves 696–702 band)"
         lines.append(
-            f"| {r.id} | {r.controller} | {_fmt(r.e_max)} {r.unit}{band} | {_fmt(r.paper_e_max)} | "
+            f"| {r.id} | {r.controller} | {r.gains} | {_fmt(r.e_max)} {r.unit}{band} | {_fmt(r.paper_e_max)} | "
             f"{_fmt(d['ratio_e_max'], 2)} | {_fmt(r.rmse)} {r.unit} | {_fmt(r.paper_rmse)} | "
             f"{_fmt(d['ratio_rmse'], 2)} | {r.window_s[0]:.2f}–{r.window_s[1]:.2f} |"
         )

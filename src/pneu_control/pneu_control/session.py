@@ -72,7 +72,9 @@ def parse_reference(text: str | None) -> dict[str, Any]:
     return out
 
 
-ROTARY_AVERAGE_S = 0.010  # see pneu_control.metrics: speed over 10 ms of encoder counts
+def rotary_average_s(speed_rpm: float) -> float:
+    """Speed-metric averaging window: one revolution at the reference (pneu_control.metrics)."""
+    return 60.0 / abs(speed_rpm) if speed_rpm else 0.0
 
 
 def window_for(axis: str, reference: Any, window_start_s: float | None = None) -> WindowSpec:
@@ -83,7 +85,7 @@ def window_for(axis: str, reference: Any, window_start_s: float | None = None) -
     if kind == "sine":
         return WindowSpec(kind="sine", frequency_hz=reference.frequency_hz)
     if kind == "constant" and axis == "rotary":
-        return WindowSpec(kind="speed", average_s=ROTARY_AVERAGE_S)
+        return WindowSpec(kind="speed", average_s=rotary_average_s(reference.value))
     if kind == "smooth_step":
         return WindowSpec(kind="positioning", t_start_s=reference.duration_s + 1.0)
     return WindowSpec(kind="fixed", t_start_s=1.0)
