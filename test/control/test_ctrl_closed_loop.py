@@ -415,3 +415,55 @@ def test_state_fields_and_units():
     assert ctrl.state_values() == tuple(getattr(st, f) for f in STATE_FIELDS)
     ctrl.update(SensorSample(1, 5_001_000_000, 2e5, 2e5, 2e5, 0.0, 0.0, 10.0, 0))
     assert ctrl.state.t == pytest.approx(0.001)
+
+
+# -- rotary angle reading (rotary_model: angle) -----------------------------
+
+
+def _angle_plant_run(p, n, hook=None):
+    """θ̈ = b0 (u − 5) with b0 in rpm/s/V (the angle reading of Eq. 25), one-sample delay."""
+    b = p.eso_smc.b_0 / RPM  # rad/s² per V
+    ctrl = AxisController("rotary", p)
+    th = w = 0.0
+    q = [5.0]
+    err, us = [], []
+    for k in range(n):
+        if hook:
+            hook(k, ctrl)
+        u = ctrl.update(SensorSample(k, k * 1_000_000, 2e5, 2e5, 2e5, 0.0, th, w, 0))
+        err.append(ctrl.state.error)
+        us.append(u)
+        q.append(u)
+        a = b * (q.pop(0) - 5.0)
+        th += T * w + 0.5 * T * T * a
+        w += T * a
+    return np.array(err) * RPM, np.array(us)
+
+
+@pytest.mark.parametrize("algorithm", ["eso_smc", "ladrc", "pid"])
+def test_rotary_angle_model_reaches_800_rpm(algorithm):
+    p = _params(
+        "rotary",
+        algorithm=algorithm,
+        rotary_model="angle",
+        **{"eso_smc.friction_compensation": False},
+    )
+    err, u = _angle_plant_run(p, 6000)
+    assert np.abs(err[4000:]).max() < 2.0  # rpm
+    assert u.min() >= 0.0 and u.max() <= 10.0
+
+
+def test_rotary_angle_model_switching_is_bumpless():
+    base = _params("rotary", rotary_model="angle", **{"eso_smc.friction_compensation": False})
+    seq = {2000: "ladrc", 3000: "pid", 4000: "eso_smc", 5000: "pid", 6000: "ladrc"}
+
+    def hook(k, c):
+        if k in seq:
+            c.set_params(with_updates(base, {"algorithm": seq[k]}))
+
+    err, u = _angle_plant_run(with_updates(base, {"algorithm": "eso_smc"}), 7000, hook)
+    for k in seq:
+        assert abs(u[k] - u[k - 1]) < 0.05, k
+        assert np.abs(err[k : k + 500]).max() < 5.0, k  # rpm
+    with pytest.raises(Exception, match="rotary_model"):
+        AxisController("rotary", base).set_params(with_updates(base, {"rotary_model": "speed"}))

@@ -7,11 +7,19 @@ in-process runner. Per :class:`~pneu_msgs_py.samples.SensorSample` it
    in rad/s for the rotary axis -- raw, quantised; any filtering belongs to the
    algorithm) and converts it to the paper's units (mm, rpm);
 2. evaluates the reference at t = (stamp_ns − first stamp_ns)·1e-9 s;
-3. runs the tracking differentiator (Eq. 23–24) when the algorithm uses it
-   (initialised at the measurement: a soft start), else uses the analytic
-   (r, ṙ, r̈);
+3. runs the tracking differentiator (Eq. 23–24) on the reference every sample
+   when ``td.enabled`` (cold start at the measurement: a soft start); LADRC and
+   ESO-SMC take its (v1, v2, v3), PID the analytic (r, ṙ, r̈);
 4. calls the algorithm, which returns the saturated deviation from the
    neutral voltage, and returns neutral + deviation (V, within [u_min, u_max]).
+
+Rotary ``rotary_model``: ``speed`` (default, the brief's reading): y = ω (rpm),
+ÿ = f + b0 u (valve → pressure → torque makes the speed second order in u).
+``angle`` (the other plausible reading of the paper's Eq. 25/31, DESIGN §5):
+LADRC and ESO-SMC act on the angle y = θ (in rpm·s, so that ẏ is the speed in
+rpm) with θ̈ = f + b0 u (b0 in rpm/s/V) and the reference θ_r = ∫v1 dt
+(trapezoid, started at the measured angle), ṙ = v1, r̈ = v2; PID stays on the
+speed. Observer states are then θ, ω, ω̇-disturbance (rad, rad/s, rad/s²).
 
 ``set_params`` validates the whole new set (including the reference and its
 waypoint file) before anything changes; the new set takes effect at the next
@@ -95,6 +103,7 @@ class AxisController:
         self.axis = axis
         self._scale = axis_scale(axis)
         self._linear = axis == "linear"
+        self._angle = axis == "rotary" and params.rotary_model == "angle"
         built = self._build(params)
         self._commit(built)
         self._pending = None
@@ -117,10 +126,12 @@ class AxisController:
 
     def _commit(self, built) -> None:
         params, ref, alg = built
+        self._td_was_on = getattr(self, "_td_on", params.td.enabled)
+        self._T = params.sample_time_s
         self._params = params
         self._ref = ref
         self._alg = alg
-        self._use_td = alg.uses_td and params.td.enabled
+        self._td_on = params.td.enabled
         self._neutral = params.limits.u_neutral
         self._delay = params.transport_delay_samples
         self._u_lo = params.limits.u_min
@@ -155,6 +166,10 @@ class AxisController:
                 params.transport_delay_samples,
                 f"read-only at run time ({old.transport_delay_samples})",
             )
+        if params.rotary_model != old.rotary_model:
+            raise ParamError(
+                "rotary_model", params.rotary_model, f"read-only at run time ({old.rotary_model})"
+            )
         self._pending = self._build(params)
 
     def reset(self) -> None:
@@ -172,6 +187,7 @@ class AxisController:
         self._u_last = self._neutral
         self._blend = 0.0  # V, decaying bumpless offset
         self._t = 0.0
+        self._th_r = self._v1_prev = 0.0  # rotary angle mode: θ_r and the last v1
         self._r = self._rd = self._y = _NAN
         self._dirty = True
         self.n_nonfinite = 0
@@ -187,24 +203,40 @@ class AxisController:
         r, rd, rdd = self._ref(t)
         self._t, self._r, self._rd, self._y = t, r, rd, y_si
         self._dirty = True
-        if not (y_si == y_si and -1e300 < y_si < 1e300):  # NaN/inf: hold, count
-            self.n_nonfinite += 1
-            return self._u_last
         k = self._scale
+        if self._angle:
+            th = sample.theta * k  # rpm·s: the angle whose derivative is the speed in rpm
+            if not (-1e300 < y_si < 1e300 and -1e300 < th < 1e300):  # NaN/inf: hold, count
+                self.n_nonfinite += 1
+                return self._u_last
+        else:
+            th = 0.0
+            if not (-1e300 < y_si < 1e300):
+                self.n_nonfinite += 1
+                return self._u_last
         y = y_si * k
-        if self._pending is not None:
-            return self._switch(y, r * k, rd * k, rdd * k)
-        if not self._started:
-            return self._cold_start(y, r * k, rd * k, rdd * k)
-        if self._use_td:
+        rp, rdp, rddp = r * k, rd * k, rdd * k
+        if self._pending is not None or not self._started:
+            return self._switch(y, th, rp, rdp, rddp)
+        if self._td_on:  # the TD runs on the reference whatever the algorithm
             td = self._td
-            td.step(r * k)
+            td.step(rp)
             v1, v2, v3 = td.v1, td.v2, td.v3
         else:
-            v1, v2, v3 = r * k, rd * k, rdd * k
+            v1, v2, v3 = rp, rdp, rddp
+        alg = self._alg
+        if self._angle:  # Eq. 25 on the angle: reference θ_r = ∫v1 dt (trapezoid)
+            th_r = self._th_r + 0.5 * self._T * (self._v1_prev + v1)
+            self._th_r, self._v1_prev = th_r, v1
+            if alg.uses_td:
+                y, v1, v2, v3 = th, th_r, v1, v2
+            else:
+                v1, v2, v3 = rp, rdp, rddp
+        elif not alg.uses_td:
+            v1, v2, v3 = rp, rdp, rddp
         hist = self._u_hist
         neutral = self._neutral
-        u = self._alg.update(y, v1, v2, v3, hist[0] - neutral) + neutral
+        u = alg.update(y, v1, v2, v3, hist[0] - neutral) + neutral
         if self._blend != 0.0:
             u = self._blended(u)
         del hist[0]
@@ -226,60 +258,70 @@ class AxisController:
         self._u_last = u
         return u
 
-    def _cold_start(self, y, r, rd, rdd) -> float:
-        if self._use_td:
-            self._td.reset(y, 0.0)  # soft start from the measurement
-            self._td.step(r)
-            v1, v2, v3 = self._td.v1, self._td.v2, self._td.v3
-        else:
-            v1, v2, v3 = r, rd, rdd
-        self._started = True
-        return self._finish(self._alg.start(y, v1, v2, v3, None, 0.0, (_NAN, _NAN, _NAN)))
+    def _inputs(self, alg, y, th, rp, rdp, rddp, v1, v2, v3):
+        """(y, r, ṙ, r̈) for ``alg``: TD output or raw reference; angle or speed domain."""
+        if self._angle and alg.uses_td:
+            return th, self._th_r, v1, v2
+        if alg.uses_td:
+            return y, v1, v2, v3
+        return y, rp, rdp, rddp
 
-    def _switch(self, y, r, rd, rdd) -> float:
-        """Apply the pending set bumplessly (see module docstring)."""
-        old_alg, old_use_td, started = self._alg, self._use_td, self._started
+    def _switch(self, y, th, rp, rdp, rddp) -> float:
+        """Cold start, or apply the pending set bumplessly (see module docstring)."""
+        started = self._started
+        old_alg = self._alg
         td = self._td
-        n_old = self._neutral
         u_applied_v = self._u_hist[0]
+        n_old = self._neutral
         hint = (_NAN, _NAN, _NAN)
-        stepped = False
         if started:
-            # bring the old algorithm's estimates to this sample (its command is discarded)
-            if old_use_td:
-                td.step(r)
-                stepped = True
+            # advance the reference pipeline with the old set, then bring the old
+            # algorithm's estimates to this sample (its command is discarded)
+            if self._td_on:
+                td.step(rp)
                 v1, v2, v3 = td.v1, td.v2, td.v3
             else:
-                v1, v2, v3 = r, rd, rdd
-            old_alg.update(y, v1, v2, v3, u_applied_v - n_old)
+                v1, v2, v3 = rp, rdp, rddp
+            if self._angle:
+                self._th_r += 0.5 * self._T * (self._v1_prev + v1)
+                self._v1_prev = v1
+            old_alg.update(
+                *self._inputs(old_alg, y, th, rp, rdp, rddp, v1, v2, v3), u_applied_v - n_old
+            )
             hint = old_alg.hint
-        params, ref, new_alg = self._pending  # new_alg: a fresh instance, no shared state
-        self._pending = None
-        self._commit((params, ref, new_alg))
+        if self._pending is not None:
+            params, ref, new_alg = self._pending  # a fresh instance: no shared state
+            self._pending = None
+            self._commit((params, ref, new_alg))
+            # the reference may have changed: re-evaluate at this sample's time
+            k = self._scale
+            r_si, rd_si, rdd_si = ref(self._t)
+            self._r, self._rd = r_si, rd_si
+            rp, rdp, rddp = r_si * k, rd_si * k, rdd_si * k
+            td.r, td.h = params.td.r, params.td.h
+        new_alg = self._alg
         new_alg.pending = self._u_hist
-        # the reference may have changed: re-evaluate at this sample's time
-        k = self._scale
-        r_si, rd_si, rdd_si = ref(self._t)
-        self._r, self._rd = r_si, rd_si
-        r, rd, rdd = r_si * k, rd_si * k, rdd_si * k
-        td.r, td.h = params.td.r, params.td.h
-        if self._use_td:
-            if not stepped:
-                # start the TD on the reference the old algorithm tracked (cold: measurement)
-                if started:  # fhan's steady state on a ramp lags by 2h: v1 = r − 2h ṙ, v2 = ṙ
-                    td.reset(r - 2.0 * td.h * rd, rd)
-                else:
-                    td.reset(y, 0.0)
-                td.step(r)
+        if not started:  # cold start: TD from the measured speed/position (soft start)
+            td.reset(y, 0.0)
+            if self._td_on:
+                td.step(rp)
+            v1, v2, v3 = (td.v1, td.v2, td.v3) if self._td_on else (rp, rdp, rddp)
+            self._th_r, self._v1_prev = th, v1
+            self._started = True
+            inputs = self._inputs(new_alg, y, th, rp, rdp, rddp, v1, v2, v3)
+            return self._finish(new_alg.start(*inputs, None, 0.0, (_NAN, _NAN, _NAN)))
+        if self._td_on:
+            if not self._td_was_on:  # TD just enabled: start it on the reference
+                td.reset(rp - 2.0 * td.h * rdp, rdp)  # fhan's steady ramp lag is 2h
+                td.step(rp)
             v1, v2, v3 = td.v1, td.v2, td.v3
         else:
-            v1, v2, v3 = r, rd, rdd
-        self._started = True
-        if not started:
-            return self._finish(new_alg.start(y, v1, v2, v3, None, 0.0, hint))
+            v1, v2, v3 = rp, rdp, rddp
+        if self._angle and old_alg.uses_td != new_alg.uses_td:  # speed ↔ angle domain
+            hint = (th, hint[0], hint[1]) if new_alg.uses_td else (hint[1], hint[2], _NAN)
+        inputs = self._inputs(new_alg, y, th, rp, rdp, rddp, v1, v2, v3)
         n = self._neutral
-        u_new = new_alg.start(y, v1, v2, v3, self._u_last - n, u_applied_v - n, hint) + n
+        u_new = new_alg.start(*inputs, self._u_last - n, u_applied_v - n, hint) + n
         # bumpless: the first command equals the last one; the offset then decays
         self._blend = (self._u_last - u_new) / self._a_blend  # _blended() decays it once
         return self._finish(self._blended(u_new) - n)

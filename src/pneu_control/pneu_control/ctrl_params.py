@@ -307,6 +307,13 @@ class AxisControllerParams:
         hi=5,
         read_only=True,
     )
+    rotary_model: str = param(
+        "speed",
+        choices=("speed", "angle"),
+        desc="rotary LADRC/ESO-SMC plant model: speed (ω̈ = f + b0 u, b0 rpm/s²/V) or angle "
+        "(θ̈ = f + b0 u on θ_r = ∫ω_r, b0 rpm/s/V); ignored on the linear axis",
+        read_only=True,
+    )
     bumpless_time_s: float = param(
         0.1,
         unit="s",

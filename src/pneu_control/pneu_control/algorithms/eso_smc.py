@@ -40,6 +40,8 @@ M_f = M_c tanh(ω/ω_s) + M_v ω (Eq. 9, sign smoothed over ω_s)::
 
 (M_v in N·m/rpm, z2 in rpm/s, f_k in rpm/s²). The Coulomb level M_c itself
 has no effect at a constant speed sign; only its reversal does, smoothed.
+With ``rotary_model: angle`` (y = θ, ẏ = ω = z2) Eq. 31 holds as printed but
+divided by J_m: f_k = −κ (M_c tanh(z2/ω_s) + M_v z2) / J_m in rpm/s.
 f_k enters the ESO's z2 channel and the law, so it is never double counted.
 
 Delay compensation (``delay_compensation``, not in the paper): with a
@@ -87,6 +89,9 @@ class EsoSmc:
         self.aw = p.integral_anti_windup
         self.l1, self.l2, self.l3 = eso_gains(p.omega_0, T)
         self.fric = bool(p.friction_compensation) and axis == "rotary"
+        self.angle = axis == "rotary" and params.rotary_model == "angle"
+        self.fs = RPM_PER_RAD_S / p.J_m  # (rpm/s) per (N·m): M_f / J_m in the angle model
+        self.M_c, self.M_v = p.M_c, p.M_v
         self.fv = RPM_PER_RAD_S * p.M_v / p.J_m  # 1/s
         self.fc = RPM_PER_RAD_S * p.M_c / (p.J_m * p.coulomb_smoothing)  # 1/s
         self.inv_ws = 1.0 / p.coulomb_smoothing
@@ -113,6 +118,8 @@ class EsoSmc:
         """f_k (rpm/s²) of the rotary friction model; 0 when off."""
         if not self.fric:
             return 0.0
+        if self.angle:  # Eq. 31 (errata): −M_f(ω)/J_m in the acceleration channel, ω = z2
+            return -self.fs * (self.M_c * math.tanh(z2 * self.inv_ws) + self.M_v * z2)
         x = abs(z1) * self.inv_ws
         sech2 = 0.0 if x > 30.0 else 1.0 / (math.cosh(x) ** 2)
         return -(self.fv + self.fc * sech2) * z2
