@@ -4,10 +4,11 @@ import json
 
 import numpy as np
 import pytest
-from pneu_control import session
 from pneu_control.analysis import analyze
 from pneu_control.runner import RunSpec, run
 from pneu_sim.params import load_plant
+
+from pneu_control import session
 
 
 @pytest.fixture(scope="module")
