@@ -45,8 +45,8 @@ from .shell_core import SENSOR_TOPICS, ControllerShellCore
 
 
 class ControllerNode(Node):
-    def __init__(self, axis: str):
-        super().__init__(f"{axis}_controller")
+    def __init__(self, axis: str, **node_kwargs):
+        super().__init__(f"{axis}_controller", **node_kwargs)
         self.axis = axis
         ro = {"read_only": True}
         self.declare_parameter(

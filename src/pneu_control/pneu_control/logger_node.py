@@ -42,8 +42,8 @@ _TYPES = {
 
 
 class LoggerNode(Node):
-    def __init__(self):
-        super().__init__("logger")
+    def __init__(self, **node_kwargs):
+        super().__init__("logger", **node_kwargs)
         ro = {"read_only": True}
         self.declare_parameter(
             "out", ".", ParameterDescriptor(description="output directory", **ro)

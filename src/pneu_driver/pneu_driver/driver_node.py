@@ -57,8 +57,8 @@ _LEVEL = {"OK": 0, "WARN": 1, "ERROR": 2}
 
 
 class DriverNode(Node):
-    def __init__(self):
-        super().__init__("pneu_driver")
+    def __init__(self, **node_kwargs):
+        super().__init__("pneu_driver", **node_kwargs)
         ro = {"read_only": True}
         self.declare_parameter(
             "rig_file",

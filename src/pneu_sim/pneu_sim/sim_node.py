@@ -67,8 +67,8 @@ def declare_from_dataclass(node: Node, params) -> dict:
 
 
 class SimNode(Node):
-    def __init__(self):
-        super().__init__("pneu_sim")
+    def __init__(self, **node_kwargs):
+        super().__init__("pneu_sim", **node_kwargs)
         values = declare_from_dataclass(self, SimNodeParams())
         self.p = with_updates(from_dict(SimNodeParams, {}, strict=False), values)
         p = self.p

@@ -1,0 +1,425 @@
+"""The colcon/ament_python layout, read from the files (no ROS, no colcon needed).
+
+For each ``src/<pkg>``: package.xml (format 3, ament_python, an exec_depend
+for everything the package imports), setup.py (data_files with the ament
+resource marker, package.xml, config and launch; console_scripts pointing at
+functions that exist), setup.cfg (script dirs where ``ros2 run`` looks),
+``resource/<pkg>``. Launch files are executed against stand-ins for
+``launch``/``launch_ros`` and every node they start is checked: executable
+exists in that package, parameter files exist in the installed config,
+parameter names are ones the node declares, with the declared type.
+"""
+
+from __future__ import annotations
+
+import ast
+import configparser
+import dataclasses
+import runpy
+import sys
+import types
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[2]
+SRC = ROOT / "src"
+PACKAGES = sorted(p.name for p in SRC.iterdir() if (p / "package.xml").is_file())
+PROJECT = {"pneu_msgs_py", "pneu_sim", "pneu_control", "pneu_driver"}
+
+# import name -> rosdep key / ROS package of the exec_depend it needs
+ROS_DEPS = {
+    m: m
+    for m in (
+        "rclpy",
+        "sensor_msgs",
+        "std_msgs",
+        "std_srvs",
+        "diagnostic_msgs",
+        "rosgraph_msgs",
+        "rcl_interfaces",
+        "builtin_interfaces",
+        "launch",
+        "launch_ros",
+        "ament_index_python",
+    )
+}
+ROSDEP_PY = {
+    "numpy": "python3-numpy",
+    "yaml": "python3-yaml",
+    "numba": "python3-numba",
+    "matplotlib": "python3-matplotlib",
+}
+# pip-only libraries (no rosdep key): must be in setup.py install_requires instead
+PIP_ONLY = {
+    "mcap": "mcap",
+    "mcap_ros2": "mcap-ros2-support",
+    "rosbags": "rosbags",
+    "zstandard": "zstandard",
+    "nidaqmx": "nidaqmx",
+}
+OPTIONAL = {"lz4"}  # imported lazily only for compression="lz4"
+# DESIGN §2: dependency direction between the project's packages
+ALLOWED_PROJECT_IMPORTS = {
+    "pneu_msgs_py": set(),
+    "pneu_driver": {"pneu_msgs_py"},
+    "pneu_sim": {"pneu_msgs_py", "pneu_driver"},
+    "pneu_control": {"pneu_msgs_py", "pneu_sim", "pneu_driver"},
+}
+ROS_ONLY = {
+    "rclpy",
+    "sensor_msgs",
+    "std_msgs",
+    "std_srvs",
+    "diagnostic_msgs",
+    "rosgraph_msgs",
+    "rcl_interfaces",
+}
+
+
+def _imports(path: Path) -> tuple[set[str], set[str]]:
+    """(all absolute import roots, roots imported at module top level)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    every, top = set(), set()
+    for node in ast.walk(tree):
+        names = []
+        if isinstance(node, ast.Import):
+            names = [a.name.split(".")[0] for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names = [node.module.split(".")[0]]
+        every.update(names)
+    for node in tree.body:
+        if isinstance(node, ast.Import):
+            top.update(a.name.split(".")[0] for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            top.add(node.module.split(".")[0])
+    return every, top
+
+
+def _package_xml(pkg: str) -> ET.Element:
+    return ET.parse(SRC / pkg / "package.xml").getroot()
+
+
+def _setup_kwargs(pkg: str) -> dict[str, Any]:
+    """Run setup.py with setuptools.setup replaced; return its keyword arguments."""
+    import os
+
+    import setuptools
+
+    captured: dict[str, Any] = {}
+    old_setup, old_cwd = setuptools.setup, os.getcwd()
+    setuptools.setup = lambda **kw: captured.update(kw)
+    try:
+        os.chdir(SRC / pkg)
+        runpy.run_path(str(SRC / pkg / "setup.py"), run_name="__main__")
+    finally:
+        setuptools.setup = old_setup
+        os.chdir(old_cwd)
+    return captured
+
+
+def _data_files(pkg: str) -> dict[str, list[str]]:
+    out: dict[str, list[str]] = {}
+    for dest, files in _setup_kwargs(pkg)["data_files"]:
+        out.setdefault(dest.replace("\\", "/"), []).extend(files)
+    return out
+
+
+def _console_scripts(pkg: str) -> dict[str, str]:
+    eps = _setup_kwargs(pkg).get("entry_points", {}).get("console_scripts", [])
+    return {name.strip(): target.strip() for name, target in (e.split("=", 1) for e in eps)}
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_package_xml_format_3_ament_python(pkg):
+    root = _package_xml(pkg)
+    assert root.tag == "package" and root.get("format") == "3"
+    assert root.findtext("name") == pkg
+    assert root.findtext("export/build_type") == "ament_python"
+    for tag in ("version", "description", "maintainer", "license"):
+        assert (root.findtext(tag) or "").strip(), f"{pkg}/package.xml: <{tag}> empty"
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_exec_depends_cover_every_import(pkg):
+    root = _package_xml(pkg)
+    deps = {e.text.strip() for e in root.findall("exec_depend")}
+    requires = " ".join(_setup_kwargs(pkg).get("install_requires", []))
+    stdlib = set(sys.stdlib_module_names)
+    files = sorted((SRC / pkg / pkg).rglob("*.py")) + sorted((SRC / pkg / "launch").glob("*.py"))
+    missing, unknown, wrong_way = [], [], []
+    for f in files:
+        every, _ = _imports(f)
+        for mod in sorted(every - stdlib - {pkg}):
+            where = f"{f.relative_to(SRC)}: {mod}"
+            if mod in ROS_DEPS:
+                if ROS_DEPS[mod] not in deps:
+                    missing.append(f"{where} -> <exec_depend>{ROS_DEPS[mod]}</exec_depend>")
+            elif mod in ROSDEP_PY:
+                if ROSDEP_PY[mod] not in deps:
+                    missing.append(f"{where} -> <exec_depend>{ROSDEP_PY[mod]}</exec_depend>")
+            elif mod in PROJECT:
+                if mod not in ALLOWED_PROJECT_IMPORTS[pkg]:
+                    wrong_way.append(where)
+                elif mod not in deps:
+                    missing.append(f"{where} -> <exec_depend>{mod}</exec_depend>")
+            elif mod in PIP_ONLY:
+                if PIP_ONLY[mod] not in requires:
+                    missing.append(f"{where} -> install_requires {PIP_ONLY[mod]}")
+            elif mod not in OPTIONAL:
+                unknown.append(where)
+    assert not wrong_way, f"imports against the dependency direction (DESIGN §2): {wrong_way}"
+    assert not unknown, f"imports this test does not know how to map to a dependency: {unknown}"
+    assert not missing, f"{pkg}: dependencies not declared:\n  " + "\n  ".join(missing)
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_rclpy_only_in_node_modules(pkg):
+    """ROS-free cores: ROS imports at module top level only in ``*_node.py`` shells."""
+    bad = []
+    for f in sorted((SRC / pkg / pkg).rglob("*.py")):
+        _, top = _imports(f)
+        if top & ROS_ONLY and not f.name.endswith("_node.py"):
+            bad.append(f"{f.relative_to(SRC)}: {sorted(top & ROS_ONLY)}")
+    assert not bad, f"ROS imported at top level outside a node shell: {bad}"
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_setup_py_data_files_and_resource_marker(pkg):
+    data = _data_files(pkg)
+    assert f"resource/{pkg}" in data.get("share/ament_index/resource_index/packages", [])
+    assert (SRC / pkg / "resource" / pkg).is_file()
+    assert "package.xml" in data.get(f"share/{pkg}", [])
+    for sub, pattern in (("config", "*.yaml"), ("launch", "*.launch.py")):
+        present = sorted(f"{sub}/{p.name}" for p in (SRC / pkg / sub).glob(pattern))
+        if present:
+            assert sorted(data.get(f"share/{pkg}/{sub}", [])) == present, (
+                f"{pkg}: {sub} not installed"
+            )
+    for files in data.values():
+        for f in files:
+            assert (SRC / pkg / f).exists(), f"{pkg}/setup.py installs missing file {f}"
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_console_scripts_point_at_existing_functions(pkg):
+    for name, target in _console_scripts(pkg).items():
+        module, _, func = target.partition(":")
+        path = SRC / pkg / (module.replace(".", "/") + ".py")
+        assert path.is_file(), (
+            f"{pkg}: console script {name} -> {target}: no {path.relative_to(SRC)}"
+        )
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        defs = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
+        assert func in defs, f"{pkg}: console script {name} -> {target}: no function {func}"
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_setup_cfg_script_dirs(pkg):
+    cfg = configparser.ConfigParser()
+    cfg.read(SRC / pkg / "setup.cfg")
+    assert cfg.get("develop", "script_dir") == f"$base/lib/{pkg}"
+    assert cfg.get("install", "install_scripts") == f"$base/lib/{pkg}"
+
+
+def test_node_executables_are_registered():
+    scripts = {pkg: _console_scripts(pkg) for pkg in PACKAGES}
+    assert scripts["pneu_sim"]["sim_node"] == "pneu_sim.sim_node:main"
+    assert scripts["pneu_driver"]["driver_node"] == "pneu_driver.driver_node:main"
+    assert (
+        scripts["pneu_control"]["linear_controller"] == "pneu_control.controller_node:main_linear"
+    )
+    assert (
+        scripts["pneu_control"]["rotary_controller"] == "pneu_control.controller_node:main_rotary"
+    )
+    assert scripts["pneu_control"]["logger"] == "pneu_control.logger_node:main"
+
+
+# --- launch files, executed against stand-ins -------------------------------
+
+
+class _Action:
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+class _Config:
+    def __init__(self, name):
+        self.name = name
+
+    def perform(self, context):
+        return context[self.name]
+
+
+def _fake_launch_modules() -> dict[str, types.ModuleType]:
+    mods = {}
+
+    def mod(name, **attrs):
+        m = types.ModuleType(name)
+        m.__dict__.update(attrs)
+        mods[name] = m
+        return m
+
+    share = lambda pkg: str(SRC / pkg)  # noqa: E731 -- src/<pkg>/config is what colcon installs
+    mod("ament_index_python")
+    mod("ament_index_python.packages", get_package_share_directory=share)
+    mod("launch", LaunchDescription=lambda entities: list(entities))
+    mod(
+        "launch.actions",
+        DeclareLaunchArgument=type("DeclareLaunchArgument", (_Action,), {}),
+        OpaqueFunction=type("OpaqueFunction", (_Action,), {}),
+        Shutdown=type("Shutdown", (_Action,), {}),
+    )
+    mod("launch.substitutions", LaunchConfiguration=_Config)
+    mod("launch_ros")
+    mod("launch_ros.actions", Node=type("Node", (_Action,), {}))
+    return mods
+
+
+LAUNCH_FILES = sorted(SRC.glob("*/launch/*.launch.py"))
+
+
+def _run_launch(path: Path, overrides: dict[str, str]) -> list[_Action]:
+    mods = _fake_launch_modules()
+    saved = {k: sys.modules.get(k) for k in mods}
+    sys.modules.update(mods)
+    try:
+        ns = runpy.run_path(str(path))
+        entities = ns["generate_launch_description"]()
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                sys.modules.pop(k, None)
+            else:
+                sys.modules[k] = v
+    args = {e.args[0]: e for e in entities if type(e).__name__ == "DeclareLaunchArgument"}
+    context = {name: a.kwargs["default_value"] for name, a in args.items()}
+    for k, v in overrides.items():
+        assert k in args, f"{path.name}: no launch argument {k}"
+        choices = args[k].kwargs.get("choices")
+        assert choices is None or v in choices
+        context[k] = v
+    nodes = []
+    for e in entities:
+        if type(e).__name__ == "OpaqueFunction":
+            nodes.extend(e.kwargs["function"](context))
+    return nodes
+
+
+def _declared_params(pkg: str, module: str) -> set[str]:
+    """Names passed as a constant to ``declare_parameter`` in a node module."""
+    tree = ast.parse((SRC / pkg / pkg / f"{module}.py").read_text(encoding="utf-8"))
+    out = set()
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "declare_parameter"
+            and node.args
+            and isinstance(node.args[0], ast.Constant)
+        ):
+            out.add(node.args[0].value)
+    return out
+
+
+def _node_param_types(package: str, executable: str) -> dict[str, type]:
+    """Every parameter a node declares, with its type (dataclass-declared ones included)."""
+    from pneu_control.ctrl_params import AxisControllerParams
+    from pneu_msgs_py.params import describe
+    from pneu_sim.lockstep import SimNodeParams
+
+    base = {"use_sim_time": bool}
+    if (package, executable) == ("pneu_sim", "sim_node"):
+        return base | {s.name: s.type for s in describe(SimNodeParams)}
+    if package == "pneu_control" and executable.endswith("_controller"):
+        own = dict.fromkeys(_declared_params("pneu_control", "controller_node"), str)
+        return base | own | {s.name: s.type for s in describe(AxisControllerParams)}
+    module = {"logger": "logger_node", "driver_node": "driver_node"}[executable]
+    return base | dict.fromkeys(_declared_params(package, module), str)
+
+
+@pytest.mark.parametrize("path", LAUNCH_FILES, ids=lambda p: f"{p.parent.parent.name}/{p.name}")
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {},
+        {"controller": "pid", "axes": "linear", "reference": "sine:amplitude=20,frequency_hz=0.25"},
+    ],
+)
+def test_launch_files_start_existing_executables_with_valid_parameters(path, overrides):
+    nodes = _run_launch(path, overrides)
+    assert nodes, f"{path.name} starts no node"
+    scripts = {pkg: _console_scripts(pkg) for pkg in PACKAGES}
+    names = [n.kwargs["name"] for n in nodes]
+    assert len(names) == len(set(names))
+    assert "logger" in names and any(n.endswith("_controller") for n in names)
+    for n in nodes:
+        pkg, exe = n.kwargs["package"], n.kwargs["executable"]
+        assert exe in scripts.get(pkg, {}), f"{path.name}: {pkg} has no executable {exe}"
+        declared = _node_param_types(pkg, exe)
+        for entry in n.kwargs.get("parameters", []):
+            if isinstance(entry, str):  # a params file: must exist and have a section for this node
+                f = Path(entry)
+                assert f.is_file(), f"{path.name}: parameter file {entry} missing"
+                assert f.parent.name == "config" and f.parent.parent.name in PACKAGES
+                data = yaml.safe_load(f.read_text(encoding="utf-8"))
+                assert n.kwargs["name"] in data, f"{f.name} has no section {n.kwargs['name']}"
+                continue
+            for key, value in entry.items():
+                assert key in declared, f"{path.name}: {exe} declares no parameter {key}"
+                want = declared[key]
+                if want is float:
+                    assert isinstance(value, float), f"{path.name}: {key}={value!r} must be a float"
+                elif want in (int, bool, str):
+                    assert type(value) is want or (want is str and key not in declared), (
+                        key,
+                        value,
+                    )
+                if isinstance(value, str) and value.endswith(".yaml"):
+                    assert Path(value).is_file(), f"{path.name}: {key} -> missing {value}"
+    if "axes" in overrides:
+        assert not any(n.kwargs["name"] == "rotary_controller" for n in nodes)
+
+
+def test_sim_launch_waits_for_every_subscriber_it_starts():
+    path = SRC / "pneu_sim" / "launch" / "sim.launch.py"
+    for axes, n_ctrl in (("both", 2), ("linear", 1)):
+        nodes = _run_launch(path, {"axes": axes})
+        sim = next(n for n in nodes if n.kwargs["executable"] == "sim_node")
+        params = sim.kwargs["parameters"][0]
+        assert params["lockstep.min_subscribers"] == n_ctrl + 1  # controllers + logger
+        assert sim.kwargs["on_exit"], "the run must end the launch when the sim finishes"
+        ctrl = [n for n in nodes if n.kwargs["name"].endswith("_controller")]
+        assert len(ctrl) == n_ctrl
+        for c in ctrl:
+            over = c.kwargs["parameters"][1]
+            assert over["use_sim_time"] is True and over["mode"] == "lockstep"
+
+
+def test_reference_argument_becomes_typed_reference_parameters():
+    path = SRC / "pneu_sim" / "launch" / "sim.launch.py"
+    nodes = _run_launch(
+        path,
+        {
+            "reference": "sine:amplitude=20,frequency_hz=0.25",
+            "rotary_reference": "constant:value=800",
+        },
+    )
+    by = {
+        n.kwargs["name"]: n.kwargs["parameters"][1]
+        for n in nodes
+        if n.kwargs["name"].endswith("_controller")
+    }
+    assert by["linear_controller"]["reference.amplitude"] == 20.0
+    assert isinstance(by["linear_controller"]["reference.amplitude"], float)
+    assert by["rotary_controller"]["reference.kind"] == "constant"
+    assert by["rotary_controller"]["reference.value"] == 800.0
+
+
+def test_param_types_helper_sees_dataclass_fields():
+    types_ = _node_param_types("pneu_control", "linear_controller")
+    assert types_["eso_smc.epsilon"] is float and "controllers_file" in types_
+    assert dataclasses.is_dataclass(__import__("pneu_sim.lockstep").lockstep.SimNodeParams)
