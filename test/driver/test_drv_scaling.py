@@ -24,7 +24,9 @@ CONFIG = Path(__file__).resolve().parents[2] / "config"
 
 def test_rig_yaml_is_the_documented_default():
     rig = load_rig_params(CONFIG / "rig.yaml")
-    assert rig == RigParams()
+    # the file states the defaults, plus SCHED_FIFO for the rig's loop thread
+    assert load_rig_params(CONFIG / "rig.yaml", overrides={"loop.rt_priority": 0}) == RigParams()
+    assert rig.loop.rt_priority == 50
     assert rig.device == "Dev1"
     assert (rig.channels.p_c1, rig.channels.laser, rig.channels.encoder) == ("ai0", "ai3", "ctr0")
     assert rig.encoder.counts_per_rev == 4000

@@ -264,6 +264,21 @@ class LoopParams:
     max_consecutive_late: int = param(
         100, lo=1, hi=100000, desc="this many late cycles in a row stop the driver (valves safe)"
     )
+    rt_priority: int = param(
+        0,
+        lo=0,
+        hi=99,
+        desc="SCHED_FIFO priority of the loop thread (0: normal scheduling; needs root, CAP_SYS_NICE or an rtprio limit)",
+        read_only=True,
+    )
+    timerslack_ns: int = param(
+        1,
+        unit="ns",
+        lo=0,
+        hi=10_000_000,
+        desc="Linux timer slack of the loop thread (0: leave the default 50 us)",
+        read_only=True,
+    )
     stats_window: int = param(
         60000, lo=100, hi=10_000_000, desc="cycles kept for jitter percentiles"
     )
