@@ -168,6 +168,11 @@ def test_writer_errors(tmp_path):
         w.write_command("yaw", 0, 5.0)
     with pytest.raises(ValueError, match="11 fields"):
         w.write_controller_state("linear", 0, [1.0, 2.0], "pid")
+    with pytest.raises(BagWriteError, match="negative time"):
+        w.write_serialized("/x", "std_msgs/msg/Empty", b"\x00\x01\x00\x00", -1, 0)
+    w.write_command("linear", -5, 5.0)
+    with pytest.raises(BagWriteError, match="negative time"):
+        w.flush()
     w.close()
     w.close()  # idempotent
     with pytest.raises(BagWriteError, match="closed"):

@@ -382,9 +382,10 @@ class _Collector:
         objects = self.objects
         if not self.sorted:
             order = np.argsort(log_t, kind="stable")
+            pub_alias, stamp_alias = pub is log_t, stamp is log_t
             log_t = log_t[order]
-            pub = log_t if pub is None else pub[order]
-            stamp = stamp[order]
+            pub = log_t if pub_alias else pub[order]
+            stamp = log_t if stamp_alias else stamp[order]
             fields = {k: v[order] for k, v in fields.items()}
             codes = None if codes is None else codes[order]
             objects = None if objects is None else [objects[i] for i in order]

@@ -358,6 +358,10 @@ class BagWriter:
         self._check_open()
         if len(data) < 4:
             raise BagWriteError(self.path, f"{topic}: {len(data)}-byte payload is not CDR")
+        if log_time_ns < 0 or publish_time_ns < 0:
+            raise BagWriteError(
+                self.path, f"{topic}: negative time ({log_time_ns}, {publish_time_ns}) ns"
+            )
         self._channel(topic, ros_type)  # type check now, not at flush
         self._var.append((topic, ros_type, int(log_time_ns), int(publish_time_ns), bytes(data)))
         self._add_pending(_HDR + len(data))
@@ -476,6 +480,11 @@ class BagWriter:
         batches = self._collect()
         if not batches:
             return
+        for b in batches:
+            if len(b.log_times) and int(b.log_times.min()) < 0:
+                raise BagWriteError(
+                    self.path, f"{b.channel.topic}: negative time {int(b.log_times.min())} ns"
+                )
         data, offsets = _interleave(batches)
         # schema / channel records of channels first used in this chunk
         head = []
