@@ -153,6 +153,9 @@ def test_watchdog_and_events_through_the_loop():
     }
     st = loop.status()
     assert st["linear"].state == "SAFE" and "watchdog" in st["linear"].causes
+    diag = loop.diagnostics()
+    assert diag["cycles"] == "12" and diag["pacing"] == "software"
+    assert diag["linear.state"] == "SAFE" and diag["linear.causes"] == "watchdog"
 
 
 def test_estop_and_reset_from_another_thread():

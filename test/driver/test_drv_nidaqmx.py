@@ -403,3 +403,35 @@ def test_unsupported_timing_is_a_setup_error_and_cleans_up(daq):
         ("write_now", len(daq.tasks) - 1, [5.0, 5.0]),
         ("close", len(daq.tasks) - 1),
     ]
+
+
+def test_pre_start_write_refused_is_not_fatal(daq, caplog):
+    daq.write_errors = {1: -200292}
+    be = NidaqmxBackend(hw_rig())
+    be.open()
+    assert be.is_open and "pre-start AO write refused" in caplog.text
+    assert daq.log[1] == ("write_now", 0, [5.0, 5.0])  # the on-demand safe value came first
+    be.close()
+
+
+def test_probe_exit_codes(daq, capsys):
+    from pneu_driver import probe
+
+    assert probe.main([]) == 0
+    assert "Dev1: present" in capsys.readouterr().out
+    daq.devices.device_names = ["Dev7"]
+    assert probe.main([]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'Dev1' not found; devices visible: Dev7" in err
+    daq.system_cls.local.side_effect = nidaqmx.errors.DaqNotFoundError("no libnidaqmx")
+    assert probe.main(["--device", "Dev3"]) == 1
+    assert "driver not found" in capsys.readouterr().err
+
+
+def test_probe_on_this_machine_names_the_missing_device(capsys):
+    """Unpatched nidaqmx: no driver here (or no such device on a rig PC): one line, exit 1."""
+    from pneu_driver import probe
+
+    assert probe.main(["--device", "NoSuchDev42"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'NoSuchDev42'" in err and "devices visible:" in err

@@ -271,6 +271,19 @@ class DriverLoop:
         with self._lock:
             return self._sup.status
 
+    def diagnostics(self) -> dict[str, str]:
+        """Key-values for the driver's periodic ``/diagnostics`` status (loop timing and axis states)."""
+        out = {
+            k: f"{v:.6g}" if isinstance(v, float) else str(v)
+            for k, v in self.stats.as_dict().items()
+        }
+        out["pacing"] = "hardware" if self.hardware_paced else "software"
+        out["realtime"] = "; ".join(self.realtime_notes) or "normal scheduling"
+        for axis, st in self.status().items():
+            out[f"{axis}.state"] = st.state
+            out[f"{axis}.causes"] = ",".join(st.causes)
+        return out
+
     def start(
         self, n_cycles: int | None = None, name: str = "pneu_driver_loop"
     ) -> threading.Thread:
@@ -294,8 +307,7 @@ class DriverLoop:
         """Open the backend and run ``n_cycles`` (None: until :meth:`stop` or ``stop_event``)."""
         if n_cycles is not None and n_cycles < 0:
             raise ValueError(f"n_cycles: {n_cycles!r} refused; allowed: an integer ≥ 0 or None")
-        self._stop.clear()
-        stop = stop_event or self._stop
+        stop = stop_event or self._stop  # a stop() before run() ends it at once
         notes, restore_rt = enable_realtime(self.rig.loop.rt_priority, self.rig.loop.timerslack_ns)
         self.realtime_notes = notes
         try:

@@ -19,7 +19,9 @@ Call sequence (``open``):
 5. AO task: two ``ao_channels.add_ao_voltage_chan(phys, name, min_val=0, max_val=10)``;
    on the sample clock: ``cfg_samp_clk_timing(rate, source="/Dev1/ai/SampleClock", ...)``,
    so a value written after reading sample k is emitted at clock k+1. The safe
-   value is written once more before the task starts.
+   value is written once more before the task starts (if DAQmx refuses a write
+   to an unstarted HW-timed single-point task, that is logged and ignored: the
+   on-demand value of step 2 holds).
 6. Start CI and AO (slaves), then AI (its clock starts them all).
 
 Per cycle: ``AnalogMultiChannelReader.read_one_sample(buf, timeout)`` (blocks
@@ -177,7 +179,14 @@ class NidaqmxBackend:
                 ao.out_stream, auto_start=False
             )
             self._ao_buf[:] = rig.ao.safe_v
-            self._writer.write_one_sample(self._ao_buf, timeout=self._timeout)
+            try:  # the first value of the timed AO task: safe (the on-demand write already set it)
+                self._writer.write_one_sample(self._ao_buf, timeout=self._timeout)
+            except nidaqmx.errors.DaqError as err:
+                log.warning(
+                    "%s: pre-start AO write refused (DAQmx %s); the on-demand safe value holds",
+                    dev,
+                    err.error_code,
+                )
             step = "starting the tasks"
             ci.start()
             ao.start()

@@ -45,11 +45,13 @@ __all__ = [
     "OK",
     "WARN",
     "ERROR",
+    "LEVEL_BYTE",
     "SAFE_V",
     "SENSOR_AXIS",
 ]
 
-OK, WARN, ERROR = "OK", "WARN", "ERROR"  # diagnostic_msgs/DiagnosticStatus levels 0, 1, 2
+OK, WARN, ERROR = "OK", "WARN", "ERROR"
+LEVEL_BYTE = {OK: 0, WARN: 1, ERROR: 2}  # diagnostic_msgs/DiagnosticStatus.level
 SAFE_V = NEUTRAL_V  # MPYE closed centre
 
 # Which axis depends on which sensor (a fault there makes that valve safe).
