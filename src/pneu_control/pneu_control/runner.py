@@ -125,6 +125,8 @@ def run(
     rec_samples: list[SensorSample] = []
     rec_state: dict[str, list[tuple[float, ...]]] = {axis: [] for axis in ctrls}
     rec_u: dict[str, list[float]] = {axis: [] for axis in ctrls}
+    rec_lin, rec_rot = rec_state.get("linear", []), rec_state.get("rotary", [])
+    u_lin, u_rot = rec_u.get("linear", []), rec_u.get("rotary", [])
     algorithms = {axis: c.params.algorithm for axis, c in ctrls.items()}
 
     s = plant.reset(x0=spec.x0)
@@ -135,17 +137,30 @@ def run(
     k = 0
     try:
         for k in range(n):
-            u_l = lin.update(s) if lin is not None else NEUTRAL_V
-            u_r = rot.update(s) if rot is not None else NEUTRAL_V
+            stamp = s.stamp_ns
             rec_samples.append(s)
-            if lin is not None:
-                rec_state["linear"].append(lin.state_values())
-                rec_u["linear"].append(u_l)
-            if rot is not None:
-                rec_state["rotary"].append(rot.state_values())
-                rec_u["rotary"].append(u_r)
             if bag is not None:
-                _log_cycle(bag, s, ctrls, u_l, u_r)
+                bag.write_sample(s)
+            if lin is not None:
+                u_l = lin.update(s)
+                values = lin.state_values()
+                rec_lin.append(values)
+                u_lin.append(u_l)
+                if bag is not None:
+                    bag.write_command("linear", stamp, u_l)
+                    bag.write_controller_state("linear", stamp, values, lin.algorithm)
+            else:
+                u_l = NEUTRAL_V
+            if rot is not None:
+                u_r = rot.update(s)
+                values = rot.state_values()
+                rec_rot.append(values)
+                u_rot.append(u_r)
+                if bag is not None:
+                    bag.write_command("rotary", stamp, u_r)
+                    bag.write_controller_state("rotary", stamp, values, rot.algorithm)
+            else:
+                u_r = NEUTRAL_V
             s = plant.step(u_hold_l, u_hold_r)  # tick k -> k+1 under u_{k-1}
             u_hold_l, u_hold_r = u_l, u_r
             if progress is not None and k % report_every == 0:
@@ -172,10 +187,3 @@ def run(
         if m > 1:
             metrics[axis] = compute_metrics(axis, t, cols["reference"], measured, window)
     return RunResult(spec, t, samples, axes, algorithms, metrics, wall, interrupted)
-
-
-def _log_cycle(bag: Any, s: SensorSample, ctrls: dict[str, AxisController], u_l: float, u_r: float):
-    bag.write_sample(s)
-    for axis, c in ctrls.items():
-        bag.write_command(axis, s.stamp_ns, u_l if axis == "linear" else u_r)
-        bag.write_controller_state(axis, s.stamp_ns, c.state_values(), c.algorithm)
