@@ -1,0 +1,209 @@
+"""The rclpy node modules themselves, run against an in-memory stand-in for rclpy.
+
+Skipped where real rclpy exists (``test_ros_rclpy_*`` run there instead).
+This checks the shells' wiring -- declarations, callbacks, topics, services,
+the lockstep handshake, the logger's bag, exit codes -- with the rclpy
+semantics listed in ``_fake_rclpy.py``; it cannot check rclpy itself.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import math
+from pathlib import Path
+
+import pytest
+
+try:  # the real thing wins: its tests cover this
+    importlib.import_module("rclpy")
+    pytest.skip("real rclpy present: see test_ros_rclpy_*.py", allow_module_level=True)
+except ImportError:
+    pass
+
+_spec = importlib.util.spec_from_file_location(
+    "_fake_rclpy", Path(__file__).with_name("_fake_rclpy.py")
+)
+fake = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(fake)
+
+from pneu_control.analysis import analyze  # noqa: E402
+from pneu_control.metrics import WindowSpec  # noqa: E402
+from pneu_control.runner import run  # noqa: E402
+
+from pneu_control import session  # noqa: E402
+
+DURATION_S = 1.0
+WINDOW_S = 0.5
+
+
+@pytest.fixture
+def world():
+    with fake.installed() as w:
+        yield w
+
+
+def _spin_until(ex, cond, timeout_s=120.0):
+    import time
+
+    t_end = time.monotonic() + timeout_s
+    while not cond() and time.monotonic() < t_end:
+        ex.spin_once()
+    assert cond()
+
+
+def test_lockstep_graph_through_the_node_modules_equals_the_runner(world, tmp_path):
+    world.overrides.update(
+        {
+            "/pneu_sim": {
+                "mode": "lockstep",
+                "axes": "linear",
+                "duration_s": DURATION_S,
+                "seed": 2,
+                "safety": False,
+                "lockstep.min_subscribers": 2,
+            },
+            "/linear_controller": {
+                "mode": "lockstep",
+                "use_sim_time": True,
+                "algorithm": "pid",
+                "reference.kind": "sine",
+                "reference.amplitude": 10.0,
+                "reference.frequency_hz": 1.0,
+            },
+            "/logger": {"out": str(tmp_path), "mode": "lockstep", "use_sim_time": True},
+        }
+    )
+    from pneu_control.controller_node import ControllerNode
+    from pneu_control.logger_node import LoggerNode
+    from pneu_sim.sim_node import SimNode
+    from rclpy.executors import SingleThreadedExecutor
+
+    logger, ctrl = LoggerNode(), ControllerNode("linear")
+    sim = SimNode()
+    ex = SingleThreadedExecutor()
+    for n in (logger, ctrl, sim):
+        ex.add_node(n)
+    ex.spin_until_future_complete(sim.done, timeout_sec=120.0)
+    assert sim.done.result() == {
+        "steps": 999,
+        "timeouts.linear": 0,
+        "stale.linear": 0,
+        "missed.linear": 0,
+    }
+    _spin_until(ex, lambda: {"/pneu_sim", "/linear_controller"} <= set(logger.core.node_params))
+    logger.core.close()
+
+    spec = session.build_spec(
+        axes=("linear",),
+        controller="pid",
+        reference="sine:amplitude=10.0,frequency_hz=1.0",
+        duration_s=DURATION_S,
+        seed=2,
+        window_start_s=WINDOW_S,
+    )
+    ref = run(spec).metrics["linear"]
+    res = analyze(tmp_path / "run.mcap", window=WindowSpec(kind="fixed", t_start_s=WINDOW_S))
+    got = res.metrics["linear"]
+    assert got.n_samples == ref.n_samples > 0
+    assert got.e_max == pytest.approx(ref.e_max, abs=1e-9, rel=0)
+    assert got.rmse == pytest.approx(ref.rmse, abs=1e-9, rel=0)
+    assert res.config["seed"] == 2 and res.config["axes"] == ["linear"]
+    assert res.config["controllers"]["linear"]["algorithm"] == "pid"
+    assert logger.core.counts["/clock"] == 1000
+
+
+def test_controller_parameters_live(world):
+    from pneu_control.controller_node import ControllerNode
+    from pneu_control.shell_core import SENSOR_TOPICS
+    from pneu_msgs_py.samples import SensorSample
+    from pneu_sim.lockstep import fill_sample_messages
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import FluidPressure, JointState
+
+    ctrl = ControllerNode("linear")
+    # what the node publishes: intercept the command publisher
+    sent = []
+    ctrl.cmd_pub.publish = lambda m: sent.append(
+        (m.header.stamp.sec, m.header.stamp.nanosec, list(m.effort))
+    )
+
+    def feed(k):
+        msgs = {t: FluidPressure() if "pressure" in t else JointState() for t in SENSOR_TOPICS}
+        fill_sample_messages(
+            msgs, SensorSample(k, k * 1_000_000, 2e5, 2e5, 1.5e5, 1e-4 * k, 0.0, 0.0, 0)
+        )
+        for t in SENSOR_TOPICS:
+            ctrl._on_sensor(t, msgs[t])
+
+    feed(0)
+    assert len(sent) == 1 and sent[0][:2] == (0, 0)  # stamped with the sample it answers
+
+    r = ctrl.set_parameters([Parameter("eso_smc.epsilon", value=900)])[
+        0
+    ]  # INTEGER, as ros2 param set sends
+    assert r.successful, r.reason
+    assert (
+        ctrl.get_parameter("eso_smc.epsilon").value == 900.0
+        and ctrl.params.eso_smc.epsilon == 900.0
+    )
+    assert ctrl.core.controller.params.eso_smc.epsilon != 900.0
+    feed(1)
+    assert ctrl.core.controller.params.eso_smc.epsilon == 900.0  # at the next sample
+
+    r = ctrl.set_parameters([Parameter("eso_smc.epsilon", value=-1)])[0]
+    assert not r.successful and "eso_smc.epsilon" in r.reason and "(0, inf" in r.reason
+    assert (
+        ctrl.params.eso_smc.epsilon == 900.0
+        and ctrl.get_parameter("eso_smc.epsilon").value == 900.0
+    )
+
+    r = ctrl.set_parameters([Parameter("sample_time_s", value=0.002)])[0]
+    assert not r.successful and "read-only" in r.reason
+
+    T, k = ctrl.params.sample_time_s, ctrl.params.eso_smc.k
+    eps = 1.25 / (k * T)
+    r = ctrl.set_parameters_atomically([Parameter("eso_smc.epsilon", value=eps)])
+    assert not r.successful and "eso_smc.k" in r.reason
+    k_new = 0.5 / (eps * T)
+    r = ctrl.set_parameters_atomically(
+        [Parameter("eso_smc.epsilon", value=eps), Parameter("eso_smc.k", value=k_new)]
+    )
+    assert r.successful, r.reason
+    assert (ctrl.params.eso_smc.epsilon, ctrl.params.eso_smc.k) == (eps, k_new)
+
+    other = "pid" if ctrl.params.algorithm != "pid" else "ladrc"
+    assert ctrl.set_parameters([Parameter("algorithm", value=other)])[0].successful
+    feed(2)
+    assert ctrl.core.controller.algorithm == other
+    assert math.isfinite(sent[-1][2][0])
+
+
+def test_controller_exits_1_with_one_line_on_a_bad_startup_value(world, capsys):
+    world.overrides["/linear_controller"] = {"algorithm": "bang_bang"}
+    import pneu_control.controller_node as cn
+
+    assert cn.main_linear() == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "algorithm" in err[0] and "pid" in err[0]
+
+
+def test_sim_estop_and_reset_services(world):
+    world.overrides["/pneu_sim"] = {"mode": "lockstep", "axes": "linear", "safety": True}
+    from pneu_sim.sim_node import SimNode
+
+    sim = SimNode()
+    r = world.call("/pneu_sim/estop")
+    assert r.success and "5 V" in r.message
+    assert sim.supervisor.estopped
+    r = world.call("/pneu_sim/reset")
+    assert r.success and not sim.supervisor.estopped
+
+
+def test_driver_without_daq_names_the_device_and_exits_1(world, capsys):
+    import pneu_driver.driver_node as dn
+
+    assert dn.main() == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "'Dev1'" in err[0] and "devices visible:" in err[0]
