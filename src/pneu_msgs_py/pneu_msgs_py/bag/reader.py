@@ -232,6 +232,10 @@ class _Column:
         self.arr[self.n : self.n + k] = c
         self.n += k
 
+    def head(self, n: int):
+        """The first ``n`` values (an array, or the single value)."""
+        return self.arr[:n] if self.arr is not None else self.const
+
     def result(self) -> np.ndarray:
         """The column; a read-only broadcast view if it held one value throughout."""
         if self.arr is None:
@@ -243,12 +247,22 @@ class _Column:
         return out
 
 
+def _own_copy(base, n: int, cap: int) -> _Column:
+    """A materialised int64 column holding ``base``'s first ``n`` values."""
+    col = _Column(np.int64, max(cap, n))
+    if n:
+        col.arr = np.empty(col.cap, dtype=np.int64)
+        col.arr[:n] = base.head(n)
+        col.n = n
+    return col
+
+
 class _TimeColumn:
     """An int64 time column that is stored only if it differs from the log time."""
 
     __slots__ = ("base", "col", "n")
 
-    def __init__(self, base: _Column) -> None:
+    def __init__(self, base) -> None:
         self.base = base
         self.col: _Column | None = None
         self.n = 0
@@ -258,16 +272,43 @@ class _TimeColumn:
             if np.array_equal(v, base_chunk):
                 self.n += len(v)
                 return
-            col = _Column(np.int64, self.base.cap)
-            if self.n:
-                col.arr = np.empty(col.cap, dtype=np.int64)
-                col.arr[: self.n] = (
-                    self.base.arr[: self.n] if self.base.arr is not None else self.base.const
-                )
-                col.n = self.n
-            self.col = col
+            self.col = _own_copy(self.base, self.n, self.base.cap)
         self.col.append(v)
         self.n += len(v)
+
+
+class _SharedLogTime:
+    """A topic's log times kept as a view of another topic's while they are identical.
+
+    At 1 kHz every topic of a cycle carries the same stamp: one array serves them all.
+    The master topic's chunk is appended first (see :func:`_add_results`).
+    """
+
+    __slots__ = ("cap", "col", "master", "n")
+
+    def __init__(self, master: _Column, capacity: int) -> None:
+        self.master = master
+        self.col: _Column | None = None
+        self.n = 0
+        self.cap = max(int(capacity), 16)
+
+    def append(self, v: np.ndarray) -> None:
+        k = len(v)
+        if self.col is None:
+            m = self.master
+            if m.n >= self.n + k and (
+                np.array_equal(m.arr[self.n : self.n + k], v)
+                if m.arr is not None
+                else _all_equal(v, m.const)
+            ):
+                self.n += k
+                return
+            self.col = _own_copy(m, self.n, self.cap)
+        self.col.append(v)
+        self.n += k
+
+    def head(self, n: int):
+        return self.col.head(n) if self.col is not None else self.master.head(n)
 
 
 def _merge_pieces(pieces: list[Piece]) -> Piece:
@@ -309,12 +350,22 @@ def _merge_pieces(pieces: list[Piece]) -> Piece:
 class _Collector:
     """One topic's columns, filled chunk by chunk (preallocated from the file's statistics)."""
 
-    def __init__(self, topic: str, ros_type: str, qos: list[QosProfile], capacity: int) -> None:
+    def __init__(
+        self,
+        topic: str,
+        ros_type: str,
+        qos: list[QosProfile],
+        capacity: int,
+        master: _Collector | None = None,
+    ) -> None:
         self.topic = topic
         self.ros_type = ros_type
         self.qos = qos
         self.capacity = capacity
-        self.log = _Column(np.int64, capacity)
+        self.master = master
+        self.log = (
+            _Column(np.int64, capacity) if master is None else _SharedLogTime(master.log, capacity)
+        )
         self.pub = _TimeColumn(self.log)
         self.stamp = _TimeColumn(self.log)
         self.fields: dict[str, _Column] = {}
@@ -373,8 +424,15 @@ class _Collector:
             self.objects.extend([None] * k)
         self.n += k
 
-    def build(self) -> TopicArrays:
-        log_t = self.log.result()
+    def log_result(self, master_log: np.ndarray | None) -> np.ndarray:
+        """The log-time array (a prefix view of the master's if shared throughout)."""
+        if isinstance(self.log, _SharedLogTime):
+            if self.log.col is not None:
+                return self.log.col.result()
+            return master_log[: self.n]
+        return self.log.result()
+
+    def build(self, log_t: np.ndarray) -> TopicArrays:
         pub = log_t if self.pub.col is None else self.pub.col.result()
         stamp = log_t if self.stamp.col is None else self.stamp.col.result()
         fields = {k: c.result() for k, c in self.fields.items()}
@@ -522,8 +580,40 @@ def _finish(path, ctx: _Ctx, collectors: dict[str, _Collector], strict: bool) ->
             raise MissingTopicError(
                 path, f"topic(s) {', '.join(missing)} not in bag; has {', '.join(sorted(ctx.seen))}"
             )
-    out = {t: c.build() for t, c in collectors.items()}
-    return RunData(ctx.metadata, out, ctx.warn, str(path), ctx.skipped)
+    return RunData(ctx.metadata, _build_all(collectors), ctx.warn, str(path), ctx.skipped)
+
+
+def _add_results(
+    results: list[tuple[str, list[Piece]]],
+    collectors: dict[str, _Collector],
+    ctx: _Ctx,
+    capacity: int | None,
+) -> None:
+    """Add one chunk's decoded pieces; the first collector is the log-time master."""
+    master = next(iter(collectors.values()), None)
+    if master is None:  # the busiest topic of the first chunk becomes the master
+        results = sorted(results, key=lambda r: -sum(len(p) for p in r[1]))
+    elif len(results) > 1:
+        results = sorted(results, key=lambda r: r[0] != master.topic)  # master first
+    for topic, pieces in results:
+        col = collectors.get(topic)
+        if col is None:
+            ros_type, qos, cap = ctx.topics[topic]
+            cap = cap if capacity is None else capacity
+            col = collectors[topic] = _Collector(topic, ros_type, qos, cap, master)
+            master = master or col
+        col.add(pieces)
+
+
+def _build_all(collectors: dict[str, _Collector]) -> dict[str, TopicArrays]:
+    out: dict[str, TopicArrays] = {}
+    master_log = None
+    for t, c in collectors.items():
+        log_t = c.log_result(master_log)
+        if c.master is None:
+            master_log = log_t
+        out[t] = c.build(log_t)
+    return out
 
 
 def _emit_warnings(ws: list[str]) -> None:
@@ -558,12 +648,7 @@ def read_run(
     collectors: dict[str, _Collector] = {}
     for fpath in files:
         for results in _file_chunks(fpath, ctx):
-            for topic, pieces in results:
-                col = collectors.get(topic)
-                if col is None:
-                    ros_type, qos, cap = ctx.topics[topic]
-                    col = collectors[topic] = _Collector(topic, ros_type, qos, cap)
-                col.add(pieces)
+            _add_results(results, collectors, ctx, None)
         for topic, (ros_type, qos, _cap) in ctx.topics.items():
             if topic not in collectors:  # a channel without messages
                 collectors[topic] = _Collector(topic, ros_type, qos, 0)
@@ -598,17 +683,12 @@ def iter_run(
     pending = None
     for fpath in files:
         for results in _file_chunks(fpath, ctx):
-            for topic, pieces in results:
-                col = collectors.get(topic)
-                if col is None:
-                    ros_type, qos, _cap = ctx.topics[topic]
-                    col = collectors[topic] = _Collector(topic, ros_type, qos, 1024 * batch_chunks)
-                col.add(pieces)
+            _add_results(results, collectors, ctx, 1024 * batch_chunks)
             n_chunks += 1
             if n_chunks % batch_chunks == 0:
                 if pending is not None:
                     yield pending
-                pending = RunData({}, {t: c.build() for t, c in collectors.items()}, [], str(path))
+                pending = RunData({}, _build_all(collectors), [], str(path))
                 total += pending.message_count
                 collectors = {}
     last = _finish(path, ctx, collectors, strict)
