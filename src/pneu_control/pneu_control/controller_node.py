@@ -32,6 +32,7 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 from rclpy import qos as rq
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -106,7 +107,11 @@ class ControllerNode(Node):
                 lambda msg, t=topic: self._on_sensor(t, msg),
                 to_rclpy(qos_for(topic, mode), rq),
             )
-        self.create_timer(1.0, self._publish_diagnostics)  # node clock: sim time under use_sim_time
+        # diagnostics at 1 Hz of wall time (steady clock): works whether /clock runs or not,
+        # and with executors whose timers do not follow sim time; stamps use the node clock
+        self.create_timer(
+            1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME)
+        )
         self.get_logger().info(f"{axis} controller ({params.algorithm}), {mode} QoS")
 
     # -- per sample: everything in the core ---------------------------------
