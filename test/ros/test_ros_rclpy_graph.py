@@ -22,6 +22,14 @@ from pneu_control import session  # noqa: E402
 DURATION_S = 5.0
 SEED = 3
 WINDOW_S = 1.0  # the sine's default window opens at 8 s: use a fixed one inside 5 s
+_EXPECTED = (
+    "/clock",
+    "/pneu/pressure/cylinder_1",
+    "/pneu/linear/joint_state",
+    "/pneu/rotary/joint_state",
+    "/pneu/linear/valve_command",
+    "/pneu/linear/controller_state",
+)
 
 
 @pytest.fixture
@@ -77,8 +85,16 @@ def test_lockstep_graph_equals_in_process_runner(ros, tmp_path):
         assert sim.done.done(), "lockstep run did not finish"
         counters = sim.done.result()
         assert counters["timeouts.linear"] == 0 and counters["stale.linear"] == 0
-        for _ in range(50):  # let the logger take the last messages and the parameters
+        n = round(DURATION_S * 1000)
+        import time
+
+        t_end = time.monotonic() + 120.0
+        while time.monotonic() < t_end and not (  # the logger's backlog and the parameters
+            all(logger.core.counts.get(t, 0) >= n for t in _EXPECTED)
+            and {"/pneu_sim", "/linear_controller"} <= set(logger.core.node_params)
+        ):
             ex.spin_once(timeout_sec=0.05)
+        assert all(logger.core.counts.get(t, 0) == n for t in _EXPECTED), logger.core.counts
     finally:
         logger.core.close()
         for n in (sim, ctrl, logger):

@@ -91,7 +91,13 @@ def test_lockstep_graph_through_the_node_modules_equals_the_runner(world, tmp_pa
         "stale.linear": 0,
         "missed.linear": 0,
     }
-    _spin_until(ex, lambda: {"/pneu_sim", "/linear_controller"} <= set(logger.core.node_params))
+    # the logger takes the last messages and has fetched the nodes' parameters
+    _spin_until(
+        ex,
+        lambda: (
+            not world.queue and {"/pneu_sim", "/linear_controller"} <= set(logger.core.node_params)
+        ),
+    )
     logger.core.close()
 
     spec = session.build_spec(

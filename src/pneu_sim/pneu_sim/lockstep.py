@@ -94,6 +94,15 @@ class LockstepParams:
         hi=64,
         read_only=True,
     )
+    settle_s: float = param(
+        1.0,
+        unit="s",
+        desc="once the subscribers are there, wait this long before sample 0 so that the other "
+        "connections (controllers -> logger) are matched too",
+        lo=0.0,
+        hi=60.0,
+        read_only=True,
+    )
     startup_timeout_s: float = param(
         30.0,
         unit="s",

@@ -120,6 +120,7 @@ class SimNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(1.0, self._publish_diagnostics, clock=steady)
         self.started = False
+        self.t_ready = None
         self.t_start = self.t_published = time.monotonic()
         if self.lockstep:
             self.create_timer(0.05, self._lockstep_watch, clock=steady)
@@ -181,19 +182,20 @@ class SimNode(Node):
 
     def _lockstep_watch(self) -> None:
         now = time.monotonic()
+        lp = self.p.lockstep
         if not self.started:
             ready = all(
-                pub.get_subscription_count() >= self.p.lockstep.min_subscribers
-                for pub in self.pubs.values()
+                pub.get_subscription_count() >= lp.min_subscribers for pub in self.pubs.values()
             )
             ready = ready and all(sub.get_publisher_count() >= 1 for sub in self.cmd_subs)
-            if ready or now - self.t_start > self.p.lockstep.startup_timeout_s:
-                if not ready:
-                    self.get_logger().warning(
-                        "starting without every expected subscriber/controller"
-                    )
+            if ready and self.t_ready is None:
+                self.t_ready = now
+            if ready and now - self.t_ready >= lp.settle_s:
                 self._start()
-        elif now - self.t_published > self.p.lockstep.timeout_s and not self.done.done():
+            elif now - self.t_start > lp.startup_timeout_s:
+                self.get_logger().warning("starting without every expected subscriber/controller")
+                self._start()
+        elif now - self.t_published > lp.timeout_s and not self.done.done():
             self.get_logger().warning(
                 f"lockstep timeout at sample {self.core.sample.k}: no answer from {', '.join(self.core.waiting_for)}",
                 throttle_duration_sec=1.0,
