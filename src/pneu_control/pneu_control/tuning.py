@@ -150,7 +150,9 @@ def grid_for(algorithm: str, axis: str, paper: Any) -> list[dict[str, float]]:
         ti_ratio = paper.pid.ki / paper.pid.kp
         for kp in paper.pid.kp * np.logspace(-3.0, 0.5, 8):
             for r in ti_ratio * np.logspace(-1.5, 1.0, 6):
-                points.append({"pid.kp": float(kp), "pid.ki": float(kp * r), "pid.kd": float(kp * kd_over_kp)})
+                points.append(
+                    {"pid.kp": float(kp), "pid.ki": float(kp * r), "pid.kd": float(kp * kd_over_kp)}
+                )
         return points
     bandwidths = np.logspace(math.log10(5.0), math.log10(400.0), 8)
     observers = np.logspace(math.log10(10.0), math.log10(600.0), 6)
@@ -172,7 +174,12 @@ def fixed_overrides(algorithm: str, b0: float, paper: Any, T: float) -> dict[str
     if algorithm == "eso_smc":
         eps = paper.eso_smc.epsilon / paper.eso_smc.b_0 * b0  # keep ε/b0 (V)
         delta = 2.0 * eps * T
-        return {"eso_smc.b_0": b0, "eso_smc.epsilon": eps, "eso_smc.delta": delta, "eso_smc.k": 1.0 / delta}
+        return {
+            "eso_smc.b_0": b0,
+            "eso_smc.epsilon": eps,
+            "eso_smc.delta": delta,
+            "eso_smc.k": 1.0 / delta,
+        }
     return {}
 
 
