@@ -213,3 +213,52 @@ def test_driver_without_daq_names_the_device_and_exits_1(world, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert "'Dev1'" in err[0] and "devices visible:" in err[0]
+
+
+def test_driver_node_with_the_twin_behind_the_daq_publishes_forwards_and_ends_safe(
+    world, tmp_path, monkeypatch
+):
+    """The driver shell around DriverLoop, with SimBackend in place of nidaqmx (software pacing)."""
+    import pneu_driver.driver_node as dn
+    import yaml
+    from pneu_driver.backend import SimBackend
+    from pneu_msgs_py.paths import config_file
+    from pneu_sim.params import load_plant
+    from pneu_sim.plant import Plant
+    from rclpy.executors import SingleThreadedExecutor
+
+    rig = yaml.safe_load(config_file("rig.yaml").read_text())
+    rig.setdefault("loop", {})["timing"] = "software"
+    rig_file = tmp_path / "rig.yaml"
+    rig_file.write_text(yaml.safe_dump(rig))
+    backends = []
+
+    def sim_backend(rig_params):
+        backends.append(SimBackend(Plant(load_plant(), seed=0), rig_params))
+        return backends[-1]
+
+    monkeypatch.setattr(dn, "NidaqmxBackend", sim_backend)
+    monkeypatch.setattr(dn, "visible_devices", lambda device: [device])
+    world.overrides["/pneu_driver"] = {"rig_file": str(rig_file), "axes": "linear"}
+    world.overrides["/linear_controller"] = {"mode": "realtime"}
+    from pneu_control.controller_node import ControllerNode
+
+    drv, ctrl = dn.DriverNode(), ControllerNode("linear")
+    ex = SingleThreadedExecutor()
+    ex.add_node(drv)
+    ex.add_node(ctrl)
+    drv.start()
+    try:
+        _spin_until(ex, lambda: ctrl.core.n_samples >= 50, timeout_s=60.0)
+        assert drv.loop.commands._newest["linear"] > 0  # commands reached the loop
+        assert drv.stamp_offset_ns is not None
+        r = world.call("/pneu_driver/estop")
+        assert r.success and drv.loop.status()["linear"].state == "SAFE"
+        k = backends[0].writes
+        _spin_until(ex, lambda: backends[0].writes > k + 20, timeout_s=30.0)
+        assert backends[0].last_written == (5.0, 5.0)  # e-stopped: the valves get 5 V
+    finally:
+        drv.loop.stop()
+        drv.thread.join(timeout=5.0)
+    assert not drv.thread.is_alive() and drv.loop.error is None
+    assert backends[0].last_written == (5.0, 5.0) and not backends[0].is_open

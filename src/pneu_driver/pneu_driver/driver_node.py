@@ -13,6 +13,7 @@ devices visible, exit status 1.
 
 from __future__ import annotations
 
+import collections
 import sys
 import threading
 
@@ -112,7 +113,7 @@ class DriverNode(Node):
             rig,
             SafetySupervisor(safety, sample_time_s=rig.period_s),
             on_sample=self._publish_sample,  # loop thread
-            on_events=self._publish_events,  # loop thread
+            on_events=self._queue_events,  # loop thread
             expected_axes=choices[axes],
             epoch_ns=self.get_clock().now().nanoseconds + rig.period_ns,  # stamps on the ROS clock
         )
@@ -125,8 +126,12 @@ class DriverNode(Node):
             )
         self.create_service(Trigger, "~/estop", self._on_estop)
         self.create_service(Trigger, "~/reset", self._on_reset)
-        self.create_timer(1.0, self._diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(1.0, self._diagnostics, clock=steady)
+        self.create_timer(0.1, self._publish_events, clock=steady)
         self.done = Future()
+        self.events: collections.deque = collections.deque(maxlen=10000)
+        self.stamp_offset_ns: int | None = None
         self.thread: threading.Thread | None = None
         self.device = rig.device
 
@@ -136,6 +141,10 @@ class DriverNode(Node):
 
     # -- loop thread ---------------------------------------------------------
     def _publish_sample(self, s) -> None:
+        if (
+            self.stamp_offset_ns is None
+        ):  # ROS clock at the first sample vs its stamp (epoch estimate)
+            self.stamp_offset_ns = self.get_clock().now().nanoseconds - s.stamp_ns
         for topic, (frame, names, pos, vel) in sample_to_values(s).items():
             m = self.msgs[topic]
             if topic in PRESSURE_TOPICS:
@@ -144,20 +153,26 @@ class DriverNode(Node):
                 fill_joint_state(m, s.stamp_ns, names, pos, vel)
             self.pubs[topic].publish(m)
 
-    def _publish_events(self, events) -> None:
-        statuses = [
-            DiagStatus(
-                _LEVEL[e.level],
-                f"pneu_driver: safety {e.axis} {e.rule}",
-                e.message,
-                self.device,
-                dict(e.values),
-            )
-            for e in events
-        ]
-        self._publish(statuses)
+    def _queue_events(self, events) -> None:
+        self.events.extend(events)  # published from the executor thread (one publisher, one thread)
 
     # -- executor thread ------------------------------------------------------
+    def _publish_events(self) -> None:
+        statuses = []
+        while self.events:
+            e = self.events.popleft()
+            statuses.append(
+                DiagStatus(
+                    _LEVEL[e.level],
+                    f"pneu_driver: safety {e.axis} {e.rule}",
+                    e.message,
+                    self.device,
+                    dict(e.values),
+                )
+            )
+        if statuses:
+            self._publish(statuses)
+
     def _on_command(self, msg: JointState, axis: str) -> None:
         try:
             stamp_ns, u = command_from_msg(msg, axis)
