@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -297,9 +296,6 @@ def main(argv: list[str] | None = None) -> int:
     print(f"ratio: {a_rate / b_rate:.1f}x")
     print(f"peak_rss_mib (analyze, streamed): {peak_rss_mib(path):.0f}")
     print(f"peak_rss_mib (read_run, all topics at once): {peak_rss_mib(path, 'read_run'):.0f}")
-    print(
-        f"bench process maxrss MiB: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}"
-    )
     if not a.keep:
         path.unlink()
     return 0

@@ -199,7 +199,11 @@ class BagWriter:
         # buffers (hot path)
         self._samples: list[tuple] = []
         self._commands: dict[str, list[tuple[int, float, int]]] = {a: [] for a in AXES}
-        self._states: dict[str, list[tuple]] = {a: [] for a in AXES}
+        # controller states: stamps, algorithms and the values flattened (no tuple per call)
+        self._states: dict[str, tuple[list[int], list[str], list[float]]] = {
+            a: ([], [], []) for a in AXES
+        }
+        self._n_fields = len(self.state_fields)
         self._clock: list[int] = []
         self._var: list[tuple[str, str, int, int, bytes]] = []  # topic, type, log, pub, data
         self._pending = 0
@@ -321,16 +325,17 @@ class BagWriter:
         if self._closed:
             self._check_open()
         try:
-            buf = self._states[axis]
+            stamps, algos, flat = self._states[axis]
         except KeyError:
             raise ValueError(f"axis: {axis!r} refused; allowed: {AXES}") from None
-        vals = tuple(values)
-        if len(vals) != len(self.state_fields):
+        if len(values) != self._n_fields:
             raise ValueError(
-                f"controller state: {len(vals)} values for {len(self.state_fields)} fields "
+                f"controller state: {len(values)} values for {self._n_fields} fields "
                 f"{self.state_fields}"
             )
-        buf.append((stamp_ns, algorithm, vals))
+        flat.extend(values)  # copies the references: later changes to ``values`` do not leak
+        stamps.append(stamp_ns)
+        algos.append(algorithm)
         self._pending += self._state_bytes + len(algorithm)
         if self._pending >= self._hard_limit:
             self.flush()
@@ -420,9 +425,9 @@ class BagWriter:
                 batches.append(_Batch(ch, lt, _records(ch, L, lt, lt, pay)))
         for axis in AXES:
             buf = self._states[axis]
-            if buf:
-                self._states[axis] = []
-                batches.extend(self._state_batches(axis, buf))
+            if buf[0]:
+                self._states[axis] = ([], [], [])
+                batches.extend(self._state_batches(axis, *buf))
         if self._clock:
             t = np.array(self._clock, dtype=np.int64)
             self._clock = []
@@ -445,17 +450,19 @@ class BagWriter:
                 batches.append(_Batch(ch, lts, records=recs))
         return batches
 
-    def _state_batches(self, axis: str, buf: list[tuple]) -> list[_Batch]:
+    def _state_batches(
+        self, axis: str, stamps: list[int], algos: list[str], flat: list[float]
+    ) -> list[_Batch]:
         topic = CONTROLLER_STATE_TOPIC[axis]
-        algos = [r[1] for r in buf]
+        n = len(stamps)
         groups: dict[str, list[int]] = {}
-        if all(a == algos[0] for a in algos):
-            groups[algos[0]] = list(range(len(buf)))
+        if algos.count(algos[0]) == n:
+            groups[algos[0]] = list(range(n))
         else:
             for i, a in enumerate(algos):
                 groups.setdefault(a, []).append(i)
-        st = np.fromiter((r[0] for r in buf), np.int64, len(buf))
-        vals = np.array([r[2] for r in buf], dtype=np.float64).reshape(len(buf), -1)
+        st = np.array(stamps, dtype=np.int64)
+        vals = np.array(flat, dtype=np.float64).reshape(n, self._n_fields)
         out = []
         for algo, idx in groups.items():
             L = self._state_layouts.get((axis, algo))
@@ -463,7 +470,7 @@ class BagWriter:
                 L = joint_state_layout(self.state_fields, position=True, frame_id=algo)
                 self._state_layouts[(axis, algo)] = L
             ch = self._channel(topic, L.ros_type)
-            if len(idx) == len(buf):
+            if len(idx) == n:
                 s, v = st, vals
             else:
                 ii = np.asarray(idx)
