@@ -263,3 +263,22 @@ def test_driver_node_with_the_twin_behind_the_daq_publishes_forwards_and_ends_sa
         drv.thread.join(timeout=5.0)
     assert not drv.thread.is_alive() and drv.loop.error is None
     assert backends[0].last_written == (5.0, 5.0) and not backends[0].is_open
+
+
+def test_sim_open_loop_lockstep_runs_to_its_duration(world):
+    world.overrides["/pneu_sim"] = {
+        "mode": "lockstep",
+        "axes": "none",
+        "duration_s": 0.2,
+        "lockstep.min_subscribers": 0,
+        "lockstep.settle_s": 0.0,
+    }
+    from pneu_sim.sim_node import SimNode
+    from rclpy.executors import SingleThreadedExecutor
+
+    sim = SimNode()
+    ex = SingleThreadedExecutor()
+    ex.add_node(sim)
+    ex.spin_until_future_complete(sim.done, timeout_sec=60.0)
+    assert sim.done.result()["steps"] == 199
+    assert sim.core.held == {"linear": 5.0, "rotary": 5.0}

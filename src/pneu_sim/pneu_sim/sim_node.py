@@ -195,6 +195,11 @@ class SimNode(Node):
             elif now - self.t_start > lp.startup_timeout_s:
                 self.get_logger().warning("starting without every expected subscriber/controller")
                 self._start()
+        elif not self.axes:  # open loop (axes: none): nobody answers, so step in batches
+            for _ in range(1000):
+                if self.done.done() or self.halted:
+                    break
+                self._advance()
         elif now - self.t_published > lp.timeout_s and not self.done.done():
             self.get_logger().warning(
                 f"lockstep timeout at sample {self.core.sample.k}: no answer from {', '.join(self.core.waiting_for)}",
