@@ -22,6 +22,7 @@ setup(
         "mcap-ros2-support>=0.5",
         "rosbags>=0.10",
         "zstandard>=0.22",
+        "lz4>=4.0",
     ],
     zip_safe=True,
     maintainer="pneu developers",
