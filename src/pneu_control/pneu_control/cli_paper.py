@@ -10,7 +10,7 @@ from pathlib import Path
 from pneu_msgs_py.paths import config_dir
 
 from . import paper, session
-from .experiments import PAPER_EXPERIMENTS, Experiment
+from .experiments import PAPER_EXPERIMENTS, Experiment, experiment_by_id
 from .plots import Series, plot_runs
 
 NAME = "paper"
@@ -30,6 +30,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="directory with controllers.yaml and controllers_retuned.yaml (default: config/)",
     )
     p.add_argument("--no-plots", action="store_true")
+    p.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        metavar="ID",
+        help="run only these experiments (repeatable): "
+        + ", ".join(e.id for e in PAPER_EXPERIMENTS),
+    )
 
 
 def _series(result, exp: Experiment, label: str, m) -> Series:
@@ -75,11 +83,12 @@ def run(args: argparse.Namespace) -> int:
         return result, m
 
     t0 = time.perf_counter()
-    print(f"pneu paper: {len(PAPER_EXPERIMENTS)} experiments on the twin (seed {args.seed})")
-    rows = paper.run_paper(out, seed=args.seed, runner=runner)
+    print(f"pneu paper: experiments of the paper on the twin (seed {args.seed})")
+    experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
+    rows = paper.run_paper(out, seed=args.seed, runner=runner, experiments=experiments)
     paper.write_table(rows, out, extra={"seed": args.seed})
     if not args.no_plots:
-        for exp in PAPER_EXPERIMENTS:
+        for exp in experiments:
             for gains in paper.GAIN_SETS:
                 keys = [
                     (exp.id, c, g)

@@ -93,11 +93,12 @@ def run_paper(
     seed: int = 0,
     runner: Callable[[Experiment, str, str, Path], tuple[RunResult, AxisMetrics]],
     log: Callable[[str], None] = print,
+    experiments: list[Experiment] | None = None,
 ) -> list[PaperRow]:
     """Run every experiment × controller with ``runner`` and collect rows."""
     out = Path(out_dir)
     rows: list[PaperRow] = []
-    for exp in PAPER_EXPERIMENTS:
+    for exp in experiments or PAPER_EXPERIMENTS:
         for controller, gains in runs_for(exp):
             run_dir = out / run_dir_name(exp, controller, gains)
             result, m = runner(exp, controller, gains, run_dir)
