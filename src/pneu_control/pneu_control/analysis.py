@@ -24,12 +24,26 @@ from typing import Any
 import numpy as np
 from pneu_msgs_py.bag.errors import BagError, MissingTopicError
 from pneu_msgs_py.bag.reader import RunData, read_run
-from pneu_msgs_py.topics import CONTROLLER_STATE_TOPIC, JOINT_STATE_TOPIC, VALVE_COMMAND_TOPIC
+from pneu_msgs_py.topics import (
+    CONTROLLER_STATE_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    JOINT_STATE_TOPIC,
+    VALVE_COMMAND_TOPIC,
+)
 
-from .bag_log import RUN_METADATA
-from .metrics import AxisMetrics, WindowSpec, compute_metrics
+from .bag_log import FAULTS_METADATA, RUN_METADATA
+from .fault_marks import FaultInterval, injected_intervals, parse_safety_status, safe_intervals
+from .metrics import AxisMetrics, WindowSpec
 
-__all__ = ["AxisTrace", "RunAnalysis", "analyze", "axis_traces", "run_config"]
+__all__ = [
+    "AxisTrace",
+    "RunAnalysis",
+    "analyze",
+    "axis_traces",
+    "fault_intervals",
+    "run_config",
+    "safety_events",
+]
 
 _PRESSURES = {
     "linear": ("/pneu/pressure/cylinder_1", "/pneu/pressure/cylinder_2"),
@@ -58,11 +72,15 @@ class RunAnalysis:
     metrics: dict[str, AxisMetrics]
     traces: dict[str, AxisTrace]
     warnings: list[str]
+    faults: list[FaultInterval] = field(default_factory=list)  # marked intervals
+    include_faults: bool = False  # metrics include the fault intervals
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "path": self.path,
             "metrics": {a: m.to_dict() for a, m in self.metrics.items()},
+            "fault_intervals": [iv.to_dict() for iv in self.faults],
+            "faults_excluded": not self.include_faults,
             "algorithms": {a: tr.algorithm for a, tr in self.traces.items()},
             "seed": self.config.get("seed"),
             "warnings": self.warnings,
@@ -136,13 +154,58 @@ def _align(stamps: np.ndarray, src_stamps: np.ndarray, values: np.ndarray, path:
     return out
 
 
+def safety_events(data: RunData) -> list[tuple[int, str, str, int, str]]:
+    """Supervisor transitions ``(stamp_ns, axis, rule, level, message)`` from ``/diagnostics``."""
+    topic = data.topics.get(DIAGNOSTICS_TOPIC)
+    if topic is None or topic.objects is None:
+        return []
+    out = []
+    for stamp, statuses in zip(topic.stamp_ns.tolist(), topic.objects):
+        for st in statuses or ():
+            parsed = parse_safety_status(st.name)
+            if parsed is not None:
+                out.append((int(stamp), parsed[0], parsed[1], int(st.level), st.message))
+    return out
+
+
+def _period_s(config: dict[str, Any]) -> float:
+    try:
+        return float(config["plant"]["sim"]["T"])
+    except (KeyError, TypeError, ValueError):
+        return 1e-3
+
+
+def fault_intervals(
+    data: RunData, config: dict[str, Any], axes: list[str], t0_ns: int
+) -> list[FaultInterval]:
+    """Injected faults (config echo or ``pneu.faults``) and safe intervals (``/diagnostics``)."""
+    faults = config.get("faults")
+    if faults is None:
+        rec = data.metadata.get(FAULTS_METADATA) or {}
+        try:
+            faults = json.loads(rec.get("faults_json", "[]"))
+        except json.JSONDecodeError as err:
+            raise BagError(data.path, f"metadata {FAULTS_METADATA} is not JSON: {err}") from None
+    out = injected_intervals(faults, axes, _period_s(config))
+    out += safe_intervals(safety_events(data), t0_ns)
+    return out
+
+
 def analyze(
     path: str | Path,
     *,
     window: WindowSpec | None = None,
     axes: list[str] | None = None,
+    include_faults: bool = False,
 ) -> RunAnalysis:
-    """The paper's metrics (DESIGN §7) of each axis of the run at ``path``."""
+    """The paper's metrics (DESIGN §7) of each axis of the run at ``path``.
+
+    Fault intervals (injected faults, and where the safety supervisor held an
+    axis safe) are marked in :attr:`RunAnalysis.faults` and left out of the
+    metrics unless ``include_faults``.
+    """
+    from .runner import axis_metrics
+
     data = read_run(path)
     config = run_config(data)
     axes = axes or _axes_in(data, config)
@@ -151,6 +214,15 @@ def analyze(
             path, "no /pneu/<axis>/controller_state topic: nothing to analyse (is this a pneu run?)"
         )
     traces = axis_traces(data, axes)
+    t0_ns = min(
+        (
+            int(data[JOINT_STATE_TOPIC[a]].stamp_ns[0])
+            for a in axes
+            if len(data[JOINT_STATE_TOPIC[a]])
+        ),
+        default=0,
+    )
+    intervals = fault_intervals(data, config, axes, t0_ns)
     metrics: dict[str, AxisMetrics] = {}
     warnings = list(data.warnings)
     for axis, tr in traces.items():
@@ -162,8 +234,7 @@ def analyze(
                 spec = WindowSpec(kind="fixed")
             else:
                 spec = WindowSpec.from_dict(wdict)
-        valid = np.isfinite(tr.measured)
-        metrics[axis] = compute_metrics(
-            axis, tr.t, tr.reference, tr.measured, spec, exclude=None if valid.all() else ~valid
+        metrics[axis] = axis_metrics(
+            axis, tr.t, tr.reference, tr.measured, spec, intervals, include_faults
         )
-    return RunAnalysis(str(path), config, metrics, traces, warnings)
+    return RunAnalysis(str(path), config, metrics, traces, warnings, intervals, include_faults)

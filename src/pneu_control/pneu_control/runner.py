@@ -34,6 +34,12 @@ SAMPLE_FIELDS = ("p_c1", "p_c2", "p_m1", "x", "theta", "omega", "counts")
 _MEASURED = {"linear": "x", "rotary": "omega"}
 
 
+def _default_safety() -> Any:
+    from pneu_driver.safety import SafetyParams
+
+    return SafetyParams()
+
+
 @dataclass(frozen=True)
 class RunSpec:
     """Everything that sets a run: with the same spec the results are byte-identical."""
@@ -46,6 +52,9 @@ class RunSpec:
     windows: dict[str, WindowSpec] = field(default_factory=dict)
     x0: float = 0.0
     name: str = "run"
+    faults: tuple[Any, ...] = ()  # pneu_sim.faults.FaultSpec
+    safety: Any = field(default_factory=_default_safety)  # SafetyParams; None = no supervisor
+    include_faults: bool = False  # metrics over the fault intervals too
 
     def __post_init__(self):
         for axis in self.axes:
@@ -69,6 +78,11 @@ class RunResult:
     metrics: dict[str, AxisMetrics]
     wall_s: float
     interrupted: bool = False
+    applied: dict[str, np.ndarray] = field(default_factory=dict)  # axis -> V held during each step
+    truth: dict[str, np.ndarray] = field(default_factory=dict)  # x, omega (true; runs with faults)
+    safety_events: list[Any] = field(default_factory=list)  # SafetyEvent, in order
+    fault_intervals: list[Any] = field(default_factory=list)  # fault_marks.FaultInterval
+    safety_counters: dict[str, int] = field(default_factory=dict)
 
     @property
     def rtf(self) -> float:
@@ -94,6 +108,8 @@ class RunResult:
             "metrics": self.metrics_dict(),
             "units": {"linear": "mm", "rotary": "rpm"},
             "config": config_echo or {},
+            "fault_intervals": [iv.to_dict() for iv in self.fault_intervals],
+            "safety_counters": self.safety_counters,
         }
         (out / "metrics.json").write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
         arrays = {"t": self.t}
@@ -105,6 +121,27 @@ class RunResult:
         return out
 
 
+RUNNER_NODE = "pneu_runner"  # the node name in /diagnostics status names
+
+
+def _diag(events: list[Any]) -> list[Any]:
+    from pneu_msgs_py.bag import DiagStatus
+
+    from .fault_marks import diag_name
+
+    level = {"OK": 0, "WARN": 1, "ERROR": 2}
+    return [
+        DiagStatus(
+            level[e.level],
+            diag_name(RUNNER_NODE, e.axis, e.rule),
+            e.message,
+            "twin",
+            dict(e.values),
+        )
+        for e in events
+    ]
+
+
 def run(
     spec: RunSpec,
     *,
@@ -112,6 +149,18 @@ def run(
     progress: Callable[[float], None] | None = None,
 ) -> RunResult:
     """Run ``spec`` in lockstep. ``bag``: an open ``BagWriter`` to log into.
+
+    With ``spec.safety`` (the default) every command passes through a
+    :class:`pneu_driver.safety.SafetySupervisor` before it reaches the plant,
+    and every sample (with the raw AI volts the twin's sensors put out) is
+    checked; transitions go to ``/diagnostics`` in the bag. ``spec.faults``
+    are injected by a :class:`pneu_sim.faults.FaultInjector`.
+
+    Per cycle k: sample s_k (faults applied) → supervisor checks s_k →
+    output for tick k (= u_{k−1} after the rules) → controllers answer s_k with
+    u_k → plant steps k → k+1 under the tick-k output. No exception from a
+    controller escapes: the controller is treated as crashed (silent) from
+    then on and the supervisor's watchdog takes its axis safe.
 
     A KeyboardInterrupt stops the loop cleanly: the result holds what ran
     (``interrupted=True``) and the caller still closes the bag.
@@ -127,7 +176,44 @@ def run(
     rec_u: dict[str, list[float]] = {axis: [] for axis in ctrls}
     rec_lin, rec_rot = rec_state.get("linear", []), rec_state.get("rotary", [])
     u_lin, u_rot = rec_u.get("linear", []), rec_u.get("rotary", [])
+    rec_out: list[tuple[float, float]] = []  # what the DAQ held during each step
+    rec_truth: list[tuple[float, float]] = []  # (x, omega) true, only with faults
     algorithms = {axis: c.params.algorithm for axis, c in ctrls.items()}
+    nan_state = (math.nan,) * len(STATE_FIELDS)
+
+    sup = None
+    volts_of = None
+    if spec.safety is not None:
+        from pneu_driver.safety import SafetySupervisor
+
+        sup = SafetySupervisor(spec.safety, sample_time_s=period)
+    inj = None
+    if spec.faults:
+        from pneu_sim.faults import FaultInjector
+
+        inj = FaultInjector(spec.faults, plant, seed=spec.seed, active_axes=spec.axes)
+    elif sup is not None:
+        from pneu_sim.faults import SensorScaling
+
+        volts_of = SensorScaling(spec.plant).volts
+    events_all: list[Any] = []
+    crashed: dict[str, str] = {}
+
+    def controller_failed(axis: str, err: BaseException, stamp: int) -> None:
+        crashed[axis] = f"{type(err).__name__}: {err}"
+        from pneu_driver.safety import ERROR, SafetyEvent
+
+        ev = SafetyEvent(
+            stamp,
+            axis,
+            "controller_exception",
+            ERROR,
+            f"{axis} controller raised {crashed[axis]}; treated as crashed (no more commands)",
+            (("exception", type(err).__name__),),
+        )
+        events_all.append(ev)
+        if bag is not None:
+            bag.write_diagnostics(stamp, _diag([ev]))
 
     s = plant.reset(x0=spec.x0)
     u_hold_l = u_hold_r = NEUTRAL_V  # what the DAQ holds during the coming period
@@ -138,31 +224,86 @@ def run(
     try:
         for k in range(n):
             stamp = s.stamp_ns
+            if inj is not None:
+                s, volts = inj.sample(k, s)
+                st = plant.state
+                rec_truth.append((st.x, st.omega))
+            elif sup is not None:
+                volts = volts_of(s)
+            if sup is not None:
+                sup.check_sample(s, volts)
+                u_hold_l, u_hold_r = sup.outputs(stamp)  # u_{k-1} after the rules, tick k
             rec_samples.append(s)
             if bag is not None:
                 bag.write_sample(s)
             if lin is not None:
-                u_l = lin.update(s)
-                values = lin.state_values()
-                rec_lin.append(values)
-                u_lin.append(u_l)
-                if bag is not None:
-                    bag.write_command("linear", stamp, u_l)
-                    bag.write_controller_state("linear", stamp, values, lin.algorithm)
+                if (inj is not None and inj.silent(k, "linear")) or "linear" in crashed:
+                    rec_lin.append(nan_state)
+                    u_lin.append(math.nan)
+                    u_l = None
+                else:
+                    try:
+                        u_l = lin.update(s)
+                    except Exception as err:  # a crashed controller must not stop the rig
+                        controller_failed("linear", err, stamp)
+                        rec_lin.append(nan_state)
+                        u_lin.append(math.nan)
+                        u_l = None
+                    else:
+                        values = lin.state_values()
+                        if inj is not None:
+                            u_l = inj.command(k, "linear", u_l)
+                        rec_lin.append(values)
+                        u_lin.append(u_l)
+                        if bag is not None:
+                            bag.write_command("linear", stamp, u_l)
+                            bag.write_controller_state("linear", stamp, values, lin.algorithm)
+                        if sup is not None:
+                            sup.command("linear", u_l, stamp)
             else:
                 u_l = NEUTRAL_V
             if rot is not None:
-                u_r = rot.update(s)
-                values = rot.state_values()
-                rec_rot.append(values)
-                u_rot.append(u_r)
-                if bag is not None:
-                    bag.write_command("rotary", stamp, u_r)
-                    bag.write_controller_state("rotary", stamp, values, rot.algorithm)
+                if (inj is not None and inj.silent(k, "rotary")) or "rotary" in crashed:
+                    rec_rot.append(nan_state)
+                    u_rot.append(math.nan)
+                    u_r = None
+                else:
+                    try:
+                        u_r = rot.update(s)
+                    except Exception as err:
+                        controller_failed("rotary", err, stamp)
+                        rec_rot.append(nan_state)
+                        u_rot.append(math.nan)
+                        u_r = None
+                    else:
+                        values = rot.state_values()
+                        if inj is not None:
+                            u_r = inj.command(k, "rotary", u_r)
+                        rec_rot.append(values)
+                        u_rot.append(u_r)
+                        if bag is not None:
+                            bag.write_command("rotary", stamp, u_r)
+                            bag.write_controller_state("rotary", stamp, values, rot.algorithm)
+                        if sup is not None:
+                            sup.command("rotary", u_r, stamp)
             else:
                 u_r = NEUTRAL_V
-            s = plant.step(u_hold_l, u_hold_r)  # tick k -> k+1 under u_{k-1}
-            u_hold_l, u_hold_r = u_l, u_r
+            if sup is not None:
+                events = sup.events()
+                if events:
+                    events_all.extend(events)
+                    if bag is not None:
+                        bag.write_diagnostics(stamp, _diag(events))
+            rec_out.append((u_hold_l, u_hold_r))
+            if inj is not None:
+                s = plant.step(*inj.valves(k, u_hold_l, u_hold_r))
+            else:
+                s = plant.step(u_hold_l, u_hold_r)  # tick k -> k+1 under u_{k-1}
+            if sup is None:  # no supervisor: the DAQ holds the last value it could write
+                if u_l is not None and math.isfinite(u_l):
+                    u_hold_l = u_l
+                if u_r is not None and math.isfinite(u_r):
+                    u_hold_r = u_r
             if progress is not None and k % report_every == 0:
                 progress(k * period)
     except KeyboardInterrupt:
@@ -175,6 +316,7 @@ def run(
         name: np.array([getattr(rs, name) for rs in rec_samples], dtype=float)
         for name in SAMPLE_FIELDS
     }
+    faults = fault_intervals_of(spec, events_all, period)
     axes: dict[str, dict[str, np.ndarray]] = {}
     metrics: dict[str, AxisMetrics] = {}
     for axis in ctrls:
@@ -185,5 +327,49 @@ def run(
         window = spec.windows.get(axis, WindowSpec(kind="fixed"))
         measured = samples[_MEASURED[axis]]
         if m > 1:
-            metrics[axis] = compute_metrics(axis, t, cols["reference"], measured, window)
-    return RunResult(spec, t, samples, axes, algorithms, metrics, wall, interrupted)
+            metrics[axis] = axis_metrics(
+                axis, t, cols["reference"], measured, window, faults, spec.include_faults
+            )
+    out = np.array(rec_out[:m], dtype=float).reshape(m, 2)
+    applied = {"linear": out[:, 0], "rotary": out[:, 1]}
+    truth = {}
+    if rec_truth:
+        tr = np.array(rec_truth[:m], dtype=float).reshape(-1, 2)
+        truth = {"x": tr[:, 0], "omega": tr[:, 1]}
+    return RunResult(
+        spec,
+        t,
+        samples,
+        axes,
+        algorithms,
+        metrics,
+        wall,
+        interrupted,
+        applied=applied,
+        truth=truth,
+        safety_events=events_all,
+        fault_intervals=faults,
+        safety_counters=dict(sup.counters) if sup is not None else {},
+    )
+
+
+def fault_intervals_of(spec: RunSpec, events: list[Any], period_s: float) -> list[Any]:
+    """Injected-fault and safe intervals of a run (see :mod:`pneu_control.fault_marks`)."""
+    from .fault_marks import injected_intervals, safe_intervals
+
+    out = injected_intervals([f.to_dict() for f in spec.faults], spec.axes, period_s)
+    out += safe_intervals((e.stamp_ns, e.axis, e.rule, e.level, e.message) for e in events)
+    return out
+
+
+def axis_metrics(axis, t, reference, measured, window, intervals, include_faults=False):
+    """DESIGN §7 metrics without the fault intervals (unless ``include_faults``) and non-finite samples."""
+    from .fault_marks import exclusion_mask
+
+    bad = ~(np.isfinite(measured) & np.isfinite(reference))
+    exclude = bad if bad.any() else None
+    if not include_faults and intervals:
+        fm = exclusion_mask(t, intervals, axis)
+        if fm is not None:
+            exclude = fm if exclude is None else (exclude | fm)
+    return compute_metrics(axis, t, reference, measured, window, exclude=exclude)

@@ -102,10 +102,20 @@ def build_spec(
     plant_file: str | Path | None = None,
     controllers_file: str | Path | None = None,
     window_start_s: float | None = None,
-    faults: Iterable[str] = (),
+    faults: Iterable[Any] = (),
     name: str = "run",
     plant: Any | None = None,
+    safety: bool | Any = True,
+    safety_file: str | Path | None = None,
+    include_faults: bool = False,
 ) -> RunSpec:
+    """A validated :class:`RunSpec` from user-level options (nothing half-applied).
+
+    ``faults``: ``NAME[:k=v,...]`` strings, dicts or :class:`pneu_sim.faults.FaultSpec`.
+    ``safety``: True (default) = the supervisor with ``safety_file`` (default
+    ``config/safety.yaml``); False = no supervisor; or a ``SafetyParams``.
+    """
+    from pneu_sim.faults import parse_faults
     from pneu_sim.params import load_plant
 
     plant_params = plant if plant is not None else load_plant(plant_file)
@@ -124,8 +134,15 @@ def build_spec(
             raise ParamError(f"{axis}.{err.key}", err.value, err.allowed) from None
         controllers[axis] = params
         windows[axis] = window_for(axis, params.reference, window_start_s)
-    if list(faults):
-        raise ValueError("--fault: fault injection is not available yet")
+    fault_specs = parse_faults(faults)
+    if safety is True:
+        from pneu_driver.safety import load_safety_params
+
+        safety_params = load_safety_params(safety_file)
+    elif safety is False or safety is None:
+        safety_params = None
+    else:
+        safety_params = safety
     return RunSpec(
         axes=axes,
         controllers=controllers,
@@ -134,6 +151,9 @@ def build_spec(
         seed=seed,
         windows=windows,
         name=name,
+        faults=fault_specs,
+        safety=safety_params,
+        include_faults=include_faults,
     )
 
 
@@ -150,6 +170,8 @@ def config_echo(spec: RunSpec) -> dict[str, Any]:
         "controllers": {axis: to_dict(p) for axis, p in spec.controllers.items()},
         "windows": {axis: w.to_dict() for axis, w in spec.windows.items()},
         "plant": to_dict(spec.plant),
+        "faults": [f.to_dict() for f in spec.faults],
+        "safety": None if spec.safety is None else to_dict(spec.safety),
         "version": __version__,
     }
 
@@ -200,13 +222,25 @@ def execute(
     report = _progress_printer(spec.duration_s, spec.name) if progress else None
     with _sigterm_as_interrupt():
         if bag:
-            from .bag_log import open_run_bag
+            from .bag_log import INTERVALS_METADATA, intervals_metadata, open_run_bag
 
             with open_run_bag(out / bag_name, spec, echo) as writer:
                 result = run(spec, bag=writer, progress=report)
+                writer.add_metadata(
+                    INTERVALS_METADATA,
+                    intervals_metadata(result.fault_intervals, result.safety_counters),
+                )
         else:
             result = run(spec, progress=report)
     result.save(out, config_echo=echo)
+    for iv in result.fault_intervals:
+        if iv.kind == "safe":
+            until = "the end" if iv.end_s == float("inf") else f"{iv.end_s:.3f} s"
+            print(
+                f"  {spec.name}: safety: {iv.axis} valve held safe from {iv.start_s:.3f} s to "
+                f"{until} ({iv.cause})",
+                file=sys.stderr,
+            )
     return result
 
 
