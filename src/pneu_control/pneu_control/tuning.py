@@ -17,8 +17,11 @@ paper's experiments:
    Δu = ±0.2 V (the motor stops below its operating point otherwise).
 2. **Equal-effort grid search** for every algorithm: the same number of
    closed-loop runs (a fixed logarithmic grid over the two gains that set
-   its bandwidths), each scored by the RMSE of a *tuning* experiment that is
-   not one of the paper's (linear: 12 mm, 0.5 Hz sine about −15 mm; rotary:
+   its bandwidths), each scored by the worst RMSE, over the nominal twin and
+   the ±30 % mass/supply corners (:mod:`pneu_control.robustness`), of a
+   *tuning* experiment that is
+   not one of the paper's (linear: 15 mm, 0.6 Hz sine about mid-stroke, peak speed
+   57 mm/s, covering the paper's 31 mm/s with margin; rotary:
    constant 1100 rpm). The best grid point wins; ties keep the lower gains.
    PID: (kp, ki) with kd/kp kept at the paper's ratio. LADRC: (λ1, ω0).
    ESO-SMC: (λ_R, ω0) with the reaching gain kept at the paper's switching
@@ -63,9 +66,9 @@ TUNING_EXPERIMENTS: dict[str, TuningExperiment] = {
         "linear",
         {
             "reference.kind": "sine",
-            "reference.amplitude": 12.0,
-            "reference.frequency_hz": 0.5,
-            "reference.offset": -15.0,
+            "reference.amplitude": 15.0,
+            "reference.frequency_hz": 0.6,
+            "reference.offset": 0.0,
         },
         8.0,
     ),
