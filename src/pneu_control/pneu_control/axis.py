@@ -20,6 +20,9 @@ LADRC and ESO-SMC act on the angle y = θ (in rpm·s, so that ẏ is the speed i
 rpm) with θ̈ = f + b0 u (b0 in rpm/s/V) and the reference θ_r = ∫v1 dt
 (trapezoid, started at the measured angle), ṙ = v1, r̈ = v2; PID stays on the
 speed. Observer states are then θ, ω, ω̇-disturbance (rad, rad/s, rad/s²).
+Algorithms with ``uses_theta`` (ESO-SMC+'s angle observer) also get the
+encoder angle ``sample.theta`` in rpm·s as their attribute ``theta`` before
+each call, whatever ``rotary_model`` is.
 
 ``set_params`` validates the whole new set (including the reference and its
 waypoint file) before anything changes; the new set takes effect at the next
@@ -188,6 +191,7 @@ class AxisController:
         self._blend = 0.0  # V, decaying bumpless offset
         self._t = 0.0
         self._th_r = self._v1_prev = 0.0  # rotary angle mode: θ_r and the last v1
+        self._theta = 0.0  # encoder angle (rpm·s) for algorithms with uses_theta
         self._r = self._rd = self._y = _NAN
         self._dirty = True
         self.n_nonfinite = 0
@@ -216,6 +220,15 @@ class AxisController:
                 return self._u_last
         y = y_si * k
         rp, rdp, rddp = r * k, rd * k, rdd * k
+        if getattr(self._alg, "uses_theta", False) or (
+            self._pending is not None and getattr(self._pending[2], "uses_theta", False)
+        ):  # an angle-observer algorithm (ESO-SMC+) reads the encoder angle, rpm·s
+            th_a = sample.theta * k
+            if not (-1e300 < th_a < 1e300):
+                self.n_nonfinite += 1
+                return self._u_last
+            self._theta = th_a
+            self._alg.theta = th_a
         if self._pending is not None or not self._started:
             return self._switch(y, th, rp, rdp, rddp)
         if self._td_on:  # the TD runs on the reference whatever the algorithm
@@ -301,6 +314,8 @@ class AxisController:
             td.r, td.h = params.td.r, params.td.h
         new_alg = self._alg
         new_alg.pending = self._u_hist
+        if getattr(new_alg, "uses_theta", False):
+            new_alg.theta = self._theta
         if not started:  # cold start: TD from the measured speed/position (soft start)
             td.reset(y, 0.0)
             if self._td_on:

@@ -20,6 +20,7 @@ whole set once (nothing half-applied).
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ __all__ = [
     "PidParams",
     "LadrcParams",
     "EsoSmcParams",
+    "EsoSmcPlusParams",
     "TdParams",
     "LimitsParams",
     "ReferenceParams",
@@ -43,7 +45,7 @@ __all__ = [
     "ParamError",
 ]
 
-ALGORITHMS = ("pid", "ladrc", "eso_smc")
+ALGORITHMS = ("pid", "ladrc", "eso_smc", "eso_smc_plus")
 REFERENCE_KINDS = ("sine", "smooth_step", "constant", "ramp", "waypoints")
 
 _POS = {"lo": 0.0, "lo_open": True}  # strictly positive
@@ -195,6 +197,110 @@ class EsoSmcParams:
     )
 
 
+# Festo MPYE flow-vs-setpoint chart (normalised flow at |u − 5 V|), digitised: the
+# controller's own copy of the datasheet curve (the twin was built from the same chart)
+MPYE_CHART_DU_V = (
+    0.0, 0.36, 0.71, 0.94, 1.20, 1.43, 1.66, 1.86, 2.12, 2.47, 2.81, 3.16, 3.47, 3.81,
+    4.20, 4.62, 4.75,
+)  # fmt: skip
+MPYE_CHART_FLOW = (
+    0.0, 0.01, 0.03, 0.06, 0.11, 0.18, 0.26, 0.31, 0.40, 0.48, 0.59, 0.67, 0.74, 0.82,
+    0.90, 0.98, 1.00,
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class EsoSmcPlusParams:
+    """ESO-SMC+ (ours, beyond the paper): see :mod:`pneu_control.algorithms.eso_smc_plus`.
+
+    The ESO-SMC law and surface (double pole at −λ_R, reaching law ε sat(s))
+    with (1) on the rotary axis a 4-state ESO on the encoder *angle*
+    (θ‴ = f + b0 u), so that the surface's ∫e_ω is the measured angle error;
+    (2) the valve's static flow curve inverted (Festo chart), so that b0 holds
+    over the whole opening range; (3) analytic reference derivatives where the
+    reference is known exactly.
+    """
+
+    lambda_r: float = param(
+        20.0, unit="1/s", desc="sliding surface pole λ_R (double)", **_POS, source="pneu tune"
+    )
+    omega_0: float = param(
+        30.0, unit="rad/s", desc="observer bandwidth ω0 (all poles)", **_POS, source="pneu tune"
+    )
+    b_0: float = param(
+        2400.0,
+        unit="mm/s²/V | rpm/s²/V",
+        desc="input gain estimate b0 (of the linearised command)",
+        **_POS,
+        source="pneu tune (step response)",
+    )
+    epsilon: float = param(
+        960.0, unit="mm/s² | rpm/s²", desc="reaching-law gain ε (Eq. 28)", **_POS
+    )
+    delta: float = param(
+        1.92, unit="mm/s | rpm/s", desc="boundary layer half-width Δ (Eq. 29)", **_POS
+    )
+    k: float = param(
+        0.52, unit="s/mm | s/rpm", desc="slope of sat inside the layer (k = 1/Δ continuous)", **_POS
+    )
+    reference_derivatives: str = param(
+        "analytic",
+        choices=("analytic", "td"),
+        desc="reference and derivatives: analytic (exact, no TD lag) or the TD (soft start)",
+    )
+    rotary_observer: str = param(
+        "angle",
+        choices=("angle", "speed"),
+        desc="rotary: 4-state ESO on the encoder angle (θ‴ = f + b0 u) or the paper's "
+        "3-state ESO on the quantised speed; ignored on the linear axis",
+    )
+    valve_linearisation: bool = param(
+        False, desc="invert the valve's static flow curve (valve_du_table/valve_flow_table)"
+    )
+    valve_du_table: tuple[float, ...] = param(
+        MPYE_CHART_DU_V,
+        unit="V",
+        desc="|u − 5 V| breakpoints of the valve flow curve",
+        source="Festo MPYE flow-vs-setpoint chart, digitised",
+    )
+    valve_flow_table: tuple[float, ...] = param(
+        MPYE_CHART_FLOW,
+        unit="-",
+        desc="normalised flow at valve_du_table",
+        source="Festo MPYE flow-vs-setpoint chart, digitised",
+    )
+    valve_unit_v: float = param(
+        1.0,
+        unit="V",
+        desc="opening where the linearised command equals the raw one (b0 is identified there)",
+        lo=0.0,
+        lo_open=True,
+        hi=4.0,
+        source="pneu tune identifies b0 with ±1 V steps",
+    )
+    delay_compensation: bool = param(
+        False,
+        desc="predict the ESO state over the transport delay with the commands already sent",
+    )
+
+    def _check(self) -> None:
+        du, fl = self.valve_du_table, self.valve_flow_table
+        if len(du) < 2 or len(du) != len(fl):
+            raise ParamError(
+                "valve_flow_table", list(fl), f"{len(du)} values, one per valve_du_table entry"
+            )
+        if du[0] != 0.0 or any(b <= a for a, b in itertools.pairwise(du)) or du[-1] > 5.0:
+            raise ParamError(
+                "valve_du_table", list(du), "strictly increasing from 0 to at most 5 V"
+            )
+        if fl[0] != 0.0 or fl[-1] != 1.0 or any(b <= a for a, b in itertools.pairwise(fl)):
+            raise ParamError("valve_flow_table", list(fl), "strictly increasing from 0 to 1")
+        if self.valve_unit_v >= du[-1]:
+            raise ParamError(
+                "valve_unit_v", self.valve_unit_v, f"(0, {du[-1]:g}) V (inside the table)"
+            )
+
+
 @dataclass(frozen=True)
 class TdParams:
     """Tracking differentiator (Eq. 23–24, fhan of Han 2009) on the reference.
@@ -286,6 +392,7 @@ class AxisControllerParams:
     pid: PidParams = param(PidParams)
     ladrc: LadrcParams = param(LadrcParams)
     eso_smc: EsoSmcParams = param(EsoSmcParams)
+    eso_smc_plus: EsoSmcPlusParams = param(EsoSmcPlusParams)
     td: TdParams = param(TdParams)
     limits: LimitsParams = param(LimitsParams)
     reference: ReferenceParams = param(ReferenceParams)
@@ -340,7 +447,7 @@ class AxisControllerParams:
                     f"c = κ(M_v + M_c/ω_s)/J_m stays below 1/T (now {c_max:.4g} 1/s)",
                 )
         w_max = omega_0_max(T)
-        for group in ("ladrc", "eso_smc"):
+        for group in ("ladrc", "eso_smc", "eso_smc_plus"):
             w0 = getattr(self, group).omega_0
             if w0 > w_max:
                 raise ParamError(
@@ -368,6 +475,20 @@ class AxisControllerParams:
                 smc.k,
                 f"(0, {1.0 / (smc.epsilon * T):.6g}) so that ε·k·T < 1 (discrete boundary layer "
                 f"stable with a one-sample delay; ε = {smc.epsilon:g}, T = {T:g} s)",
+            )
+        plus = self.eso_smc_plus
+        if plus.k * plus.delta > 1.0 + 1e-12:
+            raise ParamError(
+                "eso_smc_plus.k",
+                plus.k,
+                f"(0, 1/Δ = {1.0 / plus.delta:g}] (sat must not exceed 1 in the layer)",
+            )
+        if plus.epsilon * plus.k * T >= 1.0:
+            raise ParamError(
+                "eso_smc_plus.k",
+                plus.k,
+                f"(0, {1.0 / (plus.epsilon * T):.6g}) so that ε·k·T < 1 (ε = {plus.epsilon:g}, "
+                f"T = {T:g} s)",
             )
 
 

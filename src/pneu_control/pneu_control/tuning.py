@@ -26,7 +26,8 @@ paper's experiments:
    PID: (kp, ki) with kd/kp kept at the paper's ratio. LADRC: (λ1, ω0).
    ESO-SMC: (λ_R, ω0) with the reaching gain kept at the paper's switching
    amplitude ε/b0 (0.4 V on both axes) and the continuous saturation
-   k = 1/Δ, Δ = 2·ε·T (boundary-layer gain ε·k·T = ½).
+   k = 1/Δ, Δ = 2·ε·T (boundary-layer gain ε·k·T = ½). ESO-SMC+ (ours): the
+   same grid and rule as ESO-SMC (its other options from controllers.yaml).
 3. The TD, limits and everything else keep the paper's values.
 
 The grids and experiments below are the whole method: rerunning ``pneu tune``
@@ -165,6 +166,10 @@ def grid_for(algorithm: str, axis: str, paper: Any) -> list[dict[str, float]]:
                 points.append({"ladrc.lambda_1": float(wc), "ladrc.omega_0": float(w0)})
             elif algorithm == "eso_smc":
                 points.append({"eso_smc.lambda_r": float(wc), "eso_smc.omega_0": float(w0)})
+            elif algorithm == "eso_smc_plus":
+                points.append(
+                    {"eso_smc_plus.lambda_r": float(wc), "eso_smc_plus.omega_0": float(w0)}
+                )
             else:
                 raise ValueError(f"algorithm: {algorithm!r} has no tuning grid")
     return points
@@ -182,6 +187,15 @@ def fixed_overrides(algorithm: str, b0: float, paper: Any, T: float) -> dict[str
             "eso_smc.epsilon": eps,
             "eso_smc.delta": delta,
             "eso_smc.k": 1.0 / delta,
+        }
+    if algorithm == "eso_smc_plus":  # the same rule as ESO-SMC (ours, beyond the paper)
+        eps = paper.eso_smc.epsilon / paper.eso_smc.b_0 * b0
+        delta = 2.0 * eps * T
+        return {
+            "eso_smc_plus.b_0": b0,
+            "eso_smc_plus.epsilon": eps,
+            "eso_smc_plus.delta": delta,
+            "eso_smc_plus.k": 1.0 / delta,
         }
     return {}
 
