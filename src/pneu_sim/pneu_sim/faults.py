@@ -81,7 +81,7 @@ class StuckSensorParams:
 class NoiseBurstParams:
     """Gaussian noise added to the sensor's output voltage (EMI burst)."""
 
-    sensor: str = param("p_c1", choices=ANALOG, desc="which analog sensor")
+    sensor: str = param("x", choices=ANALOG, desc="which analog sensor")
     sigma_v: float = param(3.0, unit="V", lo=0.0, lo_open=True, hi=20.0, desc="noise (1 σ)")
 
 
@@ -90,11 +90,12 @@ class BrokenWireParams:
     """The signal wire is cut: the AI reads ``volts`` (clipped to the channel's AI range).
 
     Default: the negative rail, what an open input pulled toward its negative
-    bias reads. A cut wire that reads 0 V is *not* detectable on a 0–10 V
-    pressure sensor (0 V = atmospheric): ``volts=0`` shows that hole.
+    bias reads. A cut wire that reads 0 V is plausible on a 0–10 V pressure
+    sensor (0 V = atmospheric): ``volts=0`` shows that hole (the injected level
+    is noise-free, so only the frozen-value rule can catch it).
     """
 
-    sensor: str = param("p_c1", choices=ANALOG, desc="which analog sensor")
+    sensor: str = param("x", choices=ANALOG, desc="which analog sensor")
     volts: float = param(-10.0, unit="V", lo=-10.5, hi=10.5, desc="what the open input reads")
 
 
