@@ -64,6 +64,7 @@ SCENARIOS: tuple[Scenario, ...] = (
     Scenario(f"broken_wire:sensor=x,{_F}", ("linear",)),
     Scenario(f"broken_wire:sensor=p_m1,{_F}", ("rotary",)),
     Scenario(f"encoder_missed:fraction=1.0,{_F}", ("rotary",)),
+    Scenario("encoder_missed:fraction=1.0,start_s=0.5,duration_s=1.0", ("rotary",)),
     Scenario(f"encoder_missed:fraction=0.5,{_F}", ("rotary",)),
     Scenario(f"valve_stuck:axis=linear,volts=10,{_F}", ("linear",)),
     Scenario(f"valve_stuck:axis=rotary,volts=10,{_F}", ("rotary",)),

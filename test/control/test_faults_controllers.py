@@ -1,0 +1,155 @@
+"""Controller faults on the twin: silent (hung node), NaN commands, a core that raises.
+
+Also: ``pneu analyze`` marks and excludes the fault intervals (and agrees with
+the runner's own metrics), and every bag records the safety configuration.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from pneu_control.analysis import analyze
+from pneu_control.fault_table import Scenario, run_scenario
+from pneu_control.session import build_spec, execute
+from pneu_msgs_py.bag.reader import read_run
+from pneu_msgs_py.params import ParamError
+from pneu_msgs_py.paths import config_file
+
+from pneu_control import runner as runner_mod
+
+F = "start_s=0.5,duration_s=0.5"
+K0 = 500
+RETUNED = config_file("controllers_retuned.yaml")
+
+
+def test_silent_controllers_trip_the_watchdog_after_watchdog_ms(tmp_path):
+    row = run_scenario(
+        Scenario(f"controller_silent:axis=both,{F}", ("linear", "rotary"), 1.5),
+        tmp_path,
+        compare=False,
+    )
+    # last command answers sample k0-1; at tick k0+5 it is 6 ms old (> watchdog_ms = 5)
+    assert row.rule == "watchdog" and row.detection_cycles == 5
+    assert row.safe_cycles == 0
+    assert row.bag_complete, row.note
+    assert row.end_state == "SAFE (latched)"
+    res = row.result
+    for axis in ("linear", "rotary"):
+        # until the trip the DAQ holds the last command; from then on 5 V, also after the
+        # controller is back (latched until acknowledged)
+        assert np.all(res.applied[axis][K0 + 5 :] == 5.0)
+        assert np.all(res.applied[axis][K0 : K0 + 5] == res.axes[axis]["u"][K0 - 1])
+        assert np.isnan(res.axes[axis]["u"][K0 : K0 + 500]).all()  # nothing published
+    data = read_run(row.bag)
+    cmd = data["/pneu/linear/valve_command"]
+    assert len(cmd) == len(res.t) - 500  # the hung controller published nothing
+
+
+def test_nan_commands_are_never_written(tmp_path):
+    row = run_scenario(
+        Scenario(f"controller_nan:axis=both,{F}", ("linear", "rotary"), 1.5),
+        tmp_path,
+        compare=False,
+    )
+    assert row.rule == "output_sanity" and row.detection_cycles == 0
+    assert row.safe_cycles == 1  # the tick at which the NaN would have been written
+    assert row.bag_complete, row.note
+    res = row.result
+    for axis in ("linear", "rotary"):
+        assert np.all(np.isfinite(res.applied[axis]))
+        assert np.all(res.applied[axis][K0 + 1 :] == 5.0)
+    # the bag records what the controller published: NaN
+    u = read_run(row.bag)["/pneu/linear/valve_command"]["effort"]
+    assert np.isnan(u[K0]) and np.isfinite(u[K0 - 1])
+
+
+def test_a_controller_that_raises_is_treated_as_crashed(tmp_path, monkeypatch):
+    class Crashing(runner_mod.AxisController):
+        def update(self, sample):
+            if sample.k == 300:
+                raise ZeroDivisionError("boom")
+            return super().update(sample)
+
+    monkeypatch.setattr(runner_mod, "AxisController", Crashing)
+    spec = build_spec(
+        axes=("linear",), controller="eso_smc", duration_s=0.6, controllers_file=RETUNED
+    )
+    res = execute(spec, tmp_path)  # must not raise
+    rules = [e.rule for e in res.safety_events]
+    assert "controller_exception" in rules and "watchdog" in rules
+    assert np.all(res.applied["linear"][306:] == 5.0)  # 6 ms after the last command
+    data = read_run(tmp_path / "run.mcap")
+    names = [s.name for o in data["/diagnostics"].objects for s in o]
+    assert "pneu_runner: safety linear controller_exception" in names
+
+
+def _spec(faults, include=False, safety=True, duration=1.2):
+    return build_spec(
+        axes=("linear",),
+        controller="eso_smc",
+        sets=["reference.kind=sine", "reference.amplitude=20", "reference.frequency_hz=0.25"],
+        duration_s=duration,
+        controllers_file=RETUNED,
+        window_start_s=0.2,
+        faults=faults,
+        include_faults=include,
+        safety=safety,
+    )
+
+
+def test_analyze_marks_and_excludes_the_fault_like_the_runner(tmp_path):
+    spec = _spec(["controller_silent:axis=linear,start_s=0.6,duration_s=0.2"])
+    res = execute(spec, tmp_path)
+    an = analyze(tmp_path / "run.mcap")
+    kinds = sorted((iv.kind, iv.axis) for iv in an.faults)
+    assert kinds == [("injected", "linear"), ("safe", "linear")]
+    inj = next(iv for iv in an.faults if iv.kind == "injected")
+    assert (inj.start_s, inj.end_s) == (0.6, 0.8)
+    safe = next(iv for iv in an.faults if iv.kind == "safe")
+    assert safe.start_s == pytest.approx(0.605) and math.isinf(safe.end_s)
+    m, mr = an.metrics["linear"], res.metrics["linear"]
+    # window 0.2 s .. end, minus 0.6 s .. end: samples 200..599
+    assert m.n_samples == mr.n_samples == 400
+    assert (m.e_max, m.rmse) == (mr.e_max, mr.rmse)
+    both = analyze(tmp_path / "run.mcap", include_faults=True).metrics["linear"]
+    assert both.n_samples == 1200 - 200 - 200  # the silent samples have no controller state
+    assert both.e_max >= m.e_max
+    intervals = json.loads(
+        read_run(tmp_path / "run.mcap").metadata["pneu.fault_intervals"]["intervals_json"]
+    )
+    assert {d["kind"] for d in intervals} == {"injected", "safe"}
+
+
+def test_no_fault_no_trip_and_the_supervisor_is_transparent(tmp_path):
+    with_sup = execute(_spec([]), tmp_path / "a", bag=False)
+    without = execute(_spec([], safety=False), tmp_path / "b", bag=False)
+    assert [e.rule for e in with_sup.safety_events] == ["command"]  # 'commands arriving'
+    assert with_sup.fault_intervals == []
+    np.testing.assert_array_equal(with_sup.samples["x"], without.samples["x"])
+    np.testing.assert_array_equal(with_sup.axes["linear"]["u"], without.axes["linear"]["u"])
+    assert with_sup.metrics["linear"] == without.metrics["linear"]
+
+
+def test_every_bag_records_the_safety_configuration(tmp_path):
+    execute(_spec([], duration=0.1), tmp_path / "on")
+    rec = read_run(tmp_path / "on" / "run.mcap").metadata["pneu.safety"]
+    assert rec["enabled"] == "true" and rec["allow_unsafe"] == "false"
+    assert json.loads(rec["params_json"])["watchdog_ms"] == 5.0
+    execute(_spec([], duration=0.1, safety=False), tmp_path / "off")
+    assert read_run(tmp_path / "off" / "run.mcap").metadata["pneu.safety"]["enabled"] == "false"
+
+
+def test_unsafe_safety_file_refused_unless_allowed_then_logged(tmp_path):
+    bad = tmp_path / "safety.yaml"
+    bad.write_text("watchdog_ms: 2000.0\n")
+    with pytest.raises(ParamError, match="watchdog_ms"):
+        build_spec(axes=("linear",), duration_s=0.1, controllers_file=RETUNED, safety_file=bad)
+    bad.write_text("watchdog_ms: 2000.0\nallow_unsafe: true\n")
+    spec = build_spec(axes=("linear",), duration_s=0.1, controllers_file=RETUNED, safety_file=bad)
+    res = execute(spec, tmp_path / "run")
+    rec = read_run(tmp_path / "run" / "run.mcap").metadata["pneu.safety"]
+    assert rec["allow_unsafe"] == "true" and "watchdog_ms=2000" in rec["unsafe_overrides"]
+    assert any(e.rule == "allow_unsafe" and e.level == "WARN" for e in res.safety_events)
