@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from pneu_msgs_py.params import ParamError, from_dict, validate
 from pneu_msgs_py.samples import NEUTRAL_V, SensorSample
@@ -124,19 +126,22 @@ def test_answer_from_the_future_and_non_finite_refused():
     s = core.reset()
     assert core.offer("linear", s.stamp_ns + T_NS, 3.0) == "stale"
     assert core.offer("linear", s.stamp_ns, float("nan")) == "invalid"
-    assert not core.complete
+    core.advance()
+    assert core.held["linear"] == NEUTRAL_V  # nothing valid was written
 
 
-def test_out_of_range_voltage_is_clamped_like_a_dac():
+def test_without_supervisor_a_non_finite_answer_keeps_the_previous_command():
     plant = FakePlant()
     core = LockstepCore(plant, axes=("linear",))
     s = core.reset()
-    core.offer("linear", s.stamp_ns, 12.0)
+    core.offer("linear", s.stamp_ns, 7.0)
+    s = core.advance()
+    assert core.offer("linear", s.stamp_ns, float("inf")) == "invalid"
+    assert core.complete  # it did answer: nothing to wait for
     core.advance()
-    core.offer("linear", core.sample.stamp_ns, -1.0)
-    core.advance()
-    core.advance()
-    assert [u for u, _ in plant.applied] == [5.0, 10.0, 0.0]
+    core.advance()  # no answer at all: a timeout
+    assert [u for u, _ in plant.applied] == [5.0, 7.0, 7.0]
+    assert core.timeouts == {"linear": 1}
 
 
 class RecordingSupervisor:
@@ -151,21 +156,23 @@ class RecordingSupervisor:
         self.commands.append((axis, u, stamp_ns))
         self.last[axis] = u
 
-    def check_sample(self, s):
+    def check_sample(self, s, volts=None):
         self.samples.append(s.k)
 
     def outputs(self, now_ns):
         self.now.append(now_ns)
-        return (
-            (NEUTRAL_V, NEUTRAL_V) if self.estopped else (self.last["linear"], self.last["rotary"])
-        )
+        if self.estopped:
+            return NEUTRAL_V, NEUTRAL_V
+        return self.last["linear"], self.last["rotary"]
 
 
-def test_supervisor_sees_every_command_and_sample_and_can_force_neutral():
+def test_supervisor_in_the_runners_order():
+    """Cycle k: check s_k, output for tick k (u_{k-1} after the rules), answers u_k, step."""
     plant = FakePlant()
     sup = RecordingSupervisor()
     core = LockstepCore(plant, axes=("linear",), supervisor=sup)
     s = core.reset()
+    assert (sup.samples, sup.now) == ([0], [0])
     core.offer("linear", s.stamp_ns, 2.0)
     s = core.advance()
     sup.estopped = True
@@ -174,16 +181,18 @@ def test_supervisor_sees_every_command_and_sample_and_can_force_neutral():
     core.advance()
     assert sup.commands == [("linear", 2.0, 0), ("linear", 3.0, T_NS)]
     assert sup.samples == [0, 1, 2, 3]
-    assert sup.now == [T_NS, 2 * T_NS, 3 * T_NS]  # outputs for tick k+1
+    assert sup.now == [0, T_NS, 2 * T_NS, 3 * T_NS]
     assert plant.applied == [(5.0, 5.0), (2.0, 5.0), (5.0, 5.0)]
 
 
-def test_supervisor_gets_out_of_range_commands_unclamped():
+def test_supervisor_gets_every_answer_as_is():
     sup = RecordingSupervisor()
     core = LockstepCore(FakePlant(), axes=("linear",), supervisor=sup)
     s = core.reset()
-    core.offer("linear", s.stamp_ns, 11.0)
-    assert sup.commands == [("linear", 11.0, 0)]
+    assert core.offer("linear", s.stamp_ns, 11.0) == "accepted"
+    s = core.advance()
+    assert core.offer("linear", s.stamp_ns, float("nan")) == "accepted"  # it refuses and trips
+    assert sup.commands[0][1] == 11.0 and math.isnan(sup.commands[1][1])
 
 
 def test_bad_mode_and_axes_refused():
@@ -206,3 +215,36 @@ def test_sim_node_params_validate():
     assert p.lockstep.timeout_s == 0.5
     with pytest.raises(ParamError, match="mode"):
         from_dict(SimNodeParams, {"mode": "turbo"}, strict=False)
+
+
+def test_injected_faults_act_where_the_runner_applies_them():
+    from pneu_sim.faults import parse_faults
+    from pneu_sim.params import load_plant
+    from pneu_sim.plant import Plant
+
+    faults = parse_faults(
+        [
+            "sensor_dropout:sensor=x,start_s=0.002,duration_s=0.002",
+            "controller_silent:axis=linear,start_s=0.005,duration_s=0.001",
+            "controller_nan:axis=linear,start_s=0.007,duration_s=0.001",
+            "valve_stuck:axis=linear,volts=7.5,start_s=0.009,duration_s=0.001",
+        ]
+    )
+    plant = Plant(load_plant(), seed=1)
+    core = LockstepCore(plant, axes=("linear",), faults=faults, seed=1)
+    s = core.reset()
+    seen = []
+    for _ in range(12):
+        seen.append(s.x)
+        status = core.offer("linear", s.stamp_ns, 6.0)
+        if s.k == 5:
+            assert status == "silent" and core.complete  # a muted controller is not waited for
+        elif s.k == 7:
+            assert status == "invalid" and core.complete  # NaN: the DAQ holds 6 V
+        else:
+            assert status == "accepted"
+        s = core.advance()
+    assert math.isnan(seen[2]) and math.isnan(seen[3]) and not math.isnan(seen[4])
+    assert core.counters()["silenced.linear"] == 1 and core.timeouts == {"linear": 0}
+    # the AO holds 6 V (16-bit DAC); the stuck spool acted only during k = 9
+    assert plant.state.u_linear == pytest.approx(6.0, abs=1e-3)

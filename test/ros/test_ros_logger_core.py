@@ -69,6 +69,9 @@ def test_logged_topics_are_the_topic_table():
     assert dict(LOGGED_TOPICS)["/clock"] == "rosgraph_msgs/msg/Clock"
 
 
+FAULT = "sensor_dropout:sensor=x,start_s=1.2,duration_s=0.02"
+
+
 def _graph_params(spec):
     params = {
         f"/{axis}_controller": {**values_to_overrides(p), "use_sim_time": True, "mode": "lockstep"}
@@ -80,6 +83,10 @@ def _graph_params(spec):
         "x0": spec.x0,
         "plant_file": "",
         "mode": "lockstep",
+        "safety": True,
+        "safety_file": "",
+        "faults": FAULT,
+        "faults_file": "",
     }
     params["/logger"] = {"out": "/tmp/x", "use_sim_time": True}
     return params
@@ -99,8 +106,10 @@ def test_logger_bag_gives_the_runners_metrics_through_the_projects_analysis(tmp_
         ],
         duration_s=1.5,
         seed=4,
+        faults=[FAULT],
     )
     ref = run(spec)
+    assert ref.safety_counters["trips"] >= 1  # the dropout holds the linear valve safe
     path = tmp_path / "run.mcap"
     log = LoggerCore(path, mode="lockstep")
     for node, values in _graph_params(spec).items():
@@ -114,9 +123,11 @@ def test_logger_bag_gives_the_runners_metrics_through_the_projects_analysis(tmp_
 
     res = analyze(path)
     assert set(res.metrics) == {"linear", "rotary"}
+    assert res.faults == ref.fault_intervals  # injected + safe intervals, as the runner marks them
     for axis, m in ref.metrics.items():
         assert m.n_samples > 0
         got = res.metrics[axis]
+        assert got.n_samples == m.n_samples
         assert got.window_start_s == m.window_start_s
         assert got.e_max == pytest.approx(m.e_max, abs=1e-9, rel=0)
         assert got.rmse == pytest.approx(m.rmse, abs=1e-9, rel=0)

@@ -47,7 +47,7 @@ def _params_file(tmp_path, out):
                 "axes": "linear",
                 "duration_s": DURATION_S,
                 "seed": SEED,
-                "safety": False,  # transport only: nothing between commands and plant
+                "safety": True,  # the supervisor of config/safety.yaml, as the runner has it
                 "lockstep": {"min_subscribers": 2, "timeout_s": 10.0},
             }
         },

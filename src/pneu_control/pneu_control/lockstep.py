@@ -22,14 +22,24 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from pneu_msgs_py.convert import command_from_msg, controller_state_from_msg, typestore_messages
-from pneu_msgs_py.topics import CLOCK_TOPIC, CONTROLLER_STATE_TOPIC, VALVE_COMMAND_TOPIC
-from pneu_sim.lockstep import LockstepCore, fill_sample_messages
+from pneu_msgs_py.convert import (
+    command_from_msg,
+    controller_state_from_msg,
+    fill_diagnostic_array,
+    typestore_messages,
+)
+from pneu_msgs_py.topics import (
+    CLOCK_TOPIC,
+    CONTROLLER_STATE_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    VALVE_COMMAND_TOPIC,
+)
+from pneu_sim.lockstep import LockstepCore, fill_sample_messages, safety_statuses
 from pneu_sim.plant import Plant
 
 from .axis import STATE_FIELDS
-from .metrics import WindowSpec, compute_metrics
-from .runner import SAMPLE_FIELDS, RunResult, RunSpec
+from .metrics import WindowSpec
+from .runner import SAMPLE_FIELDS, RunResult, RunSpec, axis_metrics, fault_intervals_of
 from .shell_core import SENSOR_TOPICS, ControllerShellCore, _new, new_sensor_messages
 
 __all__ = ["CdrWire", "run_loopback"]
@@ -61,6 +71,24 @@ class CdrWire:
         return self.ts.deserialize_cdr(data, ros_type)
 
 
+_DIAG = "diagnostic_msgs/msg/DiagnosticArray"
+
+
+def _diag_msg(types: Any, stamp_ns: int, events: list[Any]) -> Any:
+    """The DiagnosticArray the sim node publishes for supervisor transitions (rosbags classes)."""
+    Time, Header = types["builtin_interfaces/msg/Time"], types["std_msgs/msg/Header"]
+    msg = types[_DIAG](header=Header(stamp=Time(sec=0, nanosec=0), frame_id=""), status=[])
+    status = types["diagnostic_msgs/msg/DiagnosticStatus"]
+    kv = types["diagnostic_msgs/msg/KeyValue"]
+    return fill_diagnostic_array(
+        msg,
+        lambda: status(level=0, name="", message="", hardware_id="", values=[]),
+        lambda: kv(key="", value=""),
+        stamp_ns,
+        safety_statuses("pneu_sim", events),
+    )
+
+
 def run_loopback(
     spec: RunSpec,
     *,
@@ -69,13 +97,30 @@ def run_loopback(
 ) -> RunResult:
     """Run ``spec`` through the shells' per-sample code and CDR (see module docstring).
 
-    ``tap(topic, ros_type, data)`` receives every message as published, in
-    publication order, ``/clock`` included (e.g. a :class:`LoggerCore`).
+    As the sim node does: the SafetySupervisor of ``spec.safety`` (unless
+    ``supervisor`` is given) and ``spec.faults`` act in the runner's order.
+    Controller faults are emulated where the sim sees them: a muted
+    controller's answer is dropped, a NaN one replaced -- the controller core
+    itself keeps running (the runner's skips the muted samples), so with
+    ``controller_silent`` the two differ after the fault. ``tap(topic,
+    ros_type, data)`` receives every message as published, in publication
+    order, ``/clock`` included (e.g. a :class:`LoggerCore`).
     """
     wire = CdrWire(tap)
     types = wire.ts.types
     plant = Plant(spec.plant, seed=spec.seed)
-    core = LockstepCore(plant, axes=tuple(spec.axes), x0=spec.x0, supervisor=supervisor)
+    if supervisor is None and spec.safety is not None:
+        from pneu_driver.safety import SafetySupervisor
+
+        supervisor = SafetySupervisor(spec.safety, sample_time_s=plant.T)
+    core = LockstepCore(
+        plant,
+        axes=tuple(spec.axes),
+        x0=spec.x0,
+        supervisor=supervisor,
+        faults=spec.faults,
+        seed=spec.seed,
+    )
     shells = {axis: ControllerShellCore(axis, spec.controllers[axis]) for axis in spec.axes}
     n = int(round(spec.duration_s / plant.T))
     ptype = {
@@ -83,10 +128,13 @@ def run_loopback(
         for t in SENSOR_TOPICS
     }
     js = "sensor_msgs/msg/JointState"
+    drain = getattr(supervisor, "events", None)
 
     rec_samples = []
     rec_state: dict[str, list[tuple[float, ...]]] = {a: [] for a in spec.axes}
     rec_u: dict[str, list[float]] = {a: [] for a in spec.axes}
+    rec_out: list[tuple[float, float]] = []
+    events_all: list[Any] = []
     algorithms: dict[str, str] = {}
     t_wall = time.perf_counter()
     Time = types["builtin_interfaces/msg/Time"]
@@ -108,8 +156,9 @@ def run_loopback(
                     got_cmd = wire.send(VALVE_COMMAND_TOPIC[axis], cmd, js)
                     got_state = wire.send(CONTROLLER_STATE_TOPIC[axis], state, js)
                     stamp, u = command_from_msg(got_cmd, axis)
-                    if core.offer(axis, stamp, u) != "accepted":
-                        raise RuntimeError(f"{axis}: answer to {stamp} ns not accepted")
+                    status = core.offer(axis, stamp, u)
+                    if status not in ("accepted", "silent", "invalid"):
+                        raise RuntimeError(f"{axis}: answer to {stamp} ns {status}")
                     st_stamp, alg, values = controller_state_from_msg(got_state)
                     if st_stamp != stamp:
                         raise RuntimeError(f"{axis}: state stamped {st_stamp}, command {stamp}")
@@ -119,6 +168,13 @@ def run_loopback(
         rec_samples.append(s)
         if not core.complete:
             raise RuntimeError(f"lockstep: no answer from {core.waiting_for} to sample {s.k}")
+        if drain is not None:
+            events = drain()
+            events_all.extend(events)
+            if events and tap is not None:  # the sim node's /diagnostics for them
+                wire.send(DIAGNOSTICS_TOPIC, _diag_msg(types, s.stamp_ns, events), _DIAG)
+        held = core.held
+        rec_out.append((held["linear"], held["rotary"]))
         s = core.advance()
     wall = time.perf_counter() - t_wall
 
@@ -126,6 +182,7 @@ def run_loopback(
     samples = {
         f: np.array([getattr(r, f) for r in rec_samples], dtype=float) for f in SAMPLE_FIELDS
     }
+    intervals = fault_intervals_of(spec, events_all, plant.T)
     axes: dict[str, dict[str, np.ndarray]] = {}
     metrics = {}
     m = len(rec_samples)
@@ -136,9 +193,28 @@ def run_loopback(
         axes[axis] = cols
         window = spec.windows.get(axis, WindowSpec(kind="fixed"))
         if m > 1:
-            metrics[axis] = compute_metrics(
-                axis, t, cols["reference"], samples[_MEASURED[axis]], window
+            metrics[axis] = axis_metrics(
+                axis,
+                t,
+                cols["reference"],
+                samples[_MEASURED[axis]],
+                window,
+                intervals,
+                spec.include_faults,
             )
-    result = RunResult(spec, t, samples, axes, algorithms, metrics, wall)
+    applied = np.array(rec_out, dtype=float).reshape(m, 2)
+    result = RunResult(
+        spec,
+        t,
+        samples,
+        axes,
+        algorithms,
+        metrics,
+        wall,
+        applied={"linear": applied[:, 0], "rotary": applied[:, 1]},
+        safety_events=events_all,
+        fault_intervals=intervals,
+        safety_counters=dict(getattr(supervisor, "counters", {}) or {}),
+    )
     result.wire = {"messages": wire.messages, "bytes": wire.bytes, **core.counters()}  # type: ignore[attr-defined]
     return result

@@ -5,10 +5,12 @@ the CDR bytes here untouched (no decode on the hot path);
 :class:`LoggerCore` writes them with :meth:`BagWriter.write_serialized` and,
 on :meth:`close`, the metadata:
 
-- ``pneu.run`` -- the same record the in-process runner writes
-  (``config_json``: axes, seed, duration, controllers, windows, plant, ...),
-  rebuilt from the parameters of the nodes in the graph, so ``pneu analyze``
-  treats a ROS run like an in-process one;
+- ``pneu.run``, ``pneu.safety``, ``pneu.faults`` -- the records the
+  in-process runner writes (``config_json``: axes, seed, duration,
+  controllers, windows, plant, safety, faults, ...), rebuilt from the
+  parameters of the nodes in the graph, so ``pneu analyze`` treats a ROS run
+  like an in-process one (the safe intervals come from ``/diagnostics``, as
+  for the runner's bags);
 - ``pneu.params<node>`` -- every parameter of every node (JSON values);
 - ``pneu.param_changes`` -- the live changes seen on ``/parameter_events``.
 
@@ -23,7 +25,6 @@ from __future__ import annotations
 
 import json
 import struct
-import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -33,7 +34,7 @@ from pneu_msgs_py.params import flatten, to_dict
 from pneu_msgs_py.topics import TOPICS
 
 from .axis import STATE_FIELDS
-from .bag_log import RUN_METADATA
+from .bag_log import RUN_METADATA, run_metadata
 
 __all__ = ["LOGGED_TOPICS", "LoggerCore", "stamp_from_cdr", "run_config_from_params"]
 
@@ -122,6 +123,23 @@ def run_config_from_params(node_params: Mapping[str, Mapping[str, Any]]) -> dict
             out["plant"] = to_dict(load_plant(sim.get("plant_file") or None))
         except (OSError, ValueError) as err:
             problems.append(f"{SIM_NODE}: plant: {err}")
+        try:
+            from pneu_sim.lockstep import load_faults
+
+            faults = load_faults(sim.get("faults", ""), sim.get("faults_file", ""))
+            out["faults"] = [f.to_dict() for f in faults]
+        except (OSError, ValueError) as err:
+            problems.append(f"{SIM_NODE}: faults: {err}")
+    run_node = sim or node_params.get(DRIVER_NODE, {})
+    if run_node:
+        out["safety"] = None
+        if run_node.get("safety", True):  # the driver always has its supervisor
+            try:
+                from pneu_driver.safety import load_safety_params
+
+                out["safety"] = to_dict(load_safety_params(run_node.get("safety_file") or None))
+            except (OSError, ValueError) as err:
+                problems.append(f"safety: {err}")
     if problems:
         out["problems"] = problems
     return out
@@ -169,17 +187,9 @@ class LoggerCore:
     def metadata(self) -> dict[str, dict[str, str]]:
         """The metadata records written on :meth:`close`."""
         config = run_config_from_params(self.node_params)
-        out = {
-            RUN_METADATA: {
-                "config_json": json.dumps(config, sort_keys=True, default=str),
-                "seed": str(config.get("seed", "")),
-                "version": str(config.get("version", "")),
-                "axes": ",".join(config.get("axes", [])),
-                "source": f"pneu logger node (ROS 2 graph, {self.mode})",
-                "start_time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            },
-            "pneu.param_changes": {"changes_json": json.dumps(self.changes, default=str)},
-        }
+        out = run_metadata(json.loads(json.dumps(config, default=str)))  # the runner's records
+        out[RUN_METADATA]["source"] = f"pneu logger node (ROS 2 graph, {self.mode})"
+        out["pneu.param_changes"] = {"changes_json": json.dumps(self.changes, default=str)}
         for node, values in sorted(self.node_params.items()):
             out[f"pneu.params{node}"] = {
                 k: json.dumps(v, default=str) for k, v in sorted(values.items())

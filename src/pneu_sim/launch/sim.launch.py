@@ -8,7 +8,7 @@ Example (the paper's sine experiment, 20 s, lockstep, bag in /tmp/run)::
 Arguments (``ros2 launch pneu_sim sim.launch.py --show-args``): controller,
 reference / linear_reference / rotary_reference (``KIND[:key=value,...]`` in
 paper units, as ``pneu run --reference``), axes, mode, duration, seed, out,
-safety. Parameter files come from this package's installed ``config/``.
+safety, faults. Parameter files come from this package's installed ``config/``.
 When the sim has published ``duration`` seconds it exits and the whole
 launch shuts down; the logger then finishes ``<out>/run.mcap``.
 """
@@ -41,6 +41,7 @@ ARGS = (
     ("seed", "0", "noise seed of the twin"),
     ("out", "out/ros", "directory of the bag (run.mcap)"),
     ("safety", "true", "SafetySupervisor between commands and plant, as on the rig"),
+    ("faults", "", "injected faults, ';'-separated NAME[:key=value,...] (as pneu run --fault)"),
 )
 
 
@@ -81,6 +82,7 @@ def _setup(context):
                 "safety": arg["safety"] == "true",
                 "plant_file": os.path.join(config, "plant.yaml"),
                 "safety_file": os.path.join(config, "safety.yaml"),
+                "faults": arg["faults"],
                 "lockstep.min_subscribers": len(axes) + 1,  # the controllers and the logger
             }
         ],

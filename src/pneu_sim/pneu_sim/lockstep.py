@@ -20,29 +20,37 @@ Two modes:
     samples than the newest accepted are dropped (:attr:`stale`), a period
     without a fresh answer is counted in :attr:`missed`.
 
-An optional ``supervisor`` (:class:`pneu_driver.safety.SafetySupervisor`:
-``command(axis, u, stamp_ns)``, ``check_sample(sample)``,
-``outputs(now_ns) -> (u_linear, u_rotary)``) sits between the answers and the
-plant, as it does between the controllers and the DAQ in the driver: every
-answer goes to it unclamped, every sample is checked, and what it outputs for
-tick k+1 is what the plant holds. In normal operation it passes the answers
-through unchanged (a one-period-old command is fresh), so the numbers stay
-the runner's. Without a supervisor, answers are clamped to 0–10 V like a DAC.
+Per cycle k, in the runner's order (``pneu_control.runner.run``): sample
+s_k, with injected faults (:class:`pneu_sim.faults.FaultInjector`) -> the
+``supervisor`` (:class:`pneu_driver.safety.SafetySupervisor`:
+``check_sample(sample, volts)``, ``outputs(now_ns)``, ``command(axis, u,
+stamp_ns)``) checks it and gives the tick-k output (u_{k-1} after its
+rules) -> the controllers' answers u_k go to it -> the plant steps k -> k+1
+under the tick-k output (through a stuck valve if one is injected). Without
+a supervisor the DAQ holds the last finite answer.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from pneu_msgs_py.convert import fill_fluid_pressure, fill_joint_state, sample_to_values
 from pneu_msgs_py.params import ParamError, param
-from pneu_msgs_py.samples import AXES, NEUTRAL_V, U_MAX_V, U_MIN_V, SensorSample
+from pneu_msgs_py.samples import AXES, NEUTRAL_V, SensorSample
 from pneu_msgs_py.topics import PRESSURE_TOPICS
 
-__all__ = ["MODES", "LockstepCore", "SimNodeParams", "active_axes", "fill_sample_messages"]
+__all__ = [
+    "MODES",
+    "LockstepCore",
+    "SimNodeParams",
+    "active_axes",
+    "fill_sample_messages",
+    "load_faults",
+    "safety_statuses",
+]
 
 MODES = ("lockstep", "realtime")
 AXES_CHOICES = ("linear", "rotary", "both", "none")
@@ -64,6 +72,46 @@ def fill_sample_messages(
             fill_fluid_pressure(m, s.stamp_ns, pos[0], frame, var)
         else:
             fill_joint_state(m, s.stamp_ns, names, pos, vel)
+
+
+def load_faults(text: str = "", path: str = "") -> tuple[Any, ...]:
+    """Fault specs from ``NAME[:k=v,...]`` items separated by ``;`` and/or a YAML file.
+
+    The file holds a list of ``{name, start_s, duration_s, params}`` mappings
+    (or a mapping with that list under ``faults``). Everything is validated
+    (:func:`pneu_sim.faults.parse_faults`) before anything runs.
+    """
+    from .faults import parse_faults
+
+    items: list[Any] = [t for t in (p.strip() for p in text.split(";")) if t]
+    if path:
+        import yaml
+
+        with open(path, encoding="utf-8") as fh:
+            data = yaml.safe_load(fh) or []
+        if isinstance(data, Mapping):
+            data = data.get("faults", [])
+        if not isinstance(data, list):
+            raise ParamError("faults_file", path, "a YAML list of faults (or faults: [...])")
+        items.extend(data)
+    return parse_faults(items)
+
+
+def safety_statuses(node: str, events: Any) -> list[Any]:
+    """Supervisor transitions as ``/diagnostics`` statuses, named ``<node>: safety <axis> <rule>``.
+
+    The name is the one :mod:`pneu_control.fault_marks` parses (runner, sim
+    node and driver alike), so ``pneu analyze`` finds the safe intervals.
+    """
+    from pneu_msgs_py.convert import DiagStatus
+
+    level = {"OK": 0, "WARN": 1, "ERROR": 2}
+    return [
+        DiagStatus(
+            level[e.level], f"{node}: safety {e.axis} {e.rule}", e.message, "twin", dict(e.values)
+        )
+        for e in events
+    ]
 
 
 def active_axes(choice: str) -> tuple[str, ...]:
@@ -154,39 +202,72 @@ class SimNodeParams:
     safety_file: str = param(
         "", desc="safety YAML ('' = safety.yaml of the installed config)", read_only=True
     )
+    faults: str = param(
+        "",
+        desc="injected faults, ';'-separated NAME[:key=value,...] as pneu run --fault takes them, "
+        "e.g. 'sensor_dropout:sensor=x,start_s=2,duration_s=0.5'",
+        read_only=True,
+    )
+    faults_file: str = param(
+        "",
+        desc="YAML list of faults ({name, start_s, duration_s, params}); added to 'faults'",
+        read_only=True,
+    )
     lockstep: LockstepParams = param(LockstepParams)
 
 
-@dataclass
 class LockstepCore:
     """Sample/command bookkeeping of one simulated rig (see module docstring).
 
     ``plant`` is a :class:`pneu_sim.plant.Plant` (``reset(x0=)``, ``step(u_l, u_r)``,
-    ``T``); any object with that interface works (the tests use a fake).
+    ``T``, ``params``); any object with that interface works (the tests use a
+    fake). ``faults``: :class:`pneu_sim.faults.FaultSpec` items (or their
+    ``NAME:k=v`` / dict forms), injected as the runner injects them.
+    ``volts_of(sample)``: the raw AI volts the supervisor checks (default: the
+    twin's own sensor scaling when there is a supervisor).
     """
 
-    plant: Any
-    axes: tuple[str, ...] = AXES
-    mode: str = "lockstep"
-    x0: float = 0.0
-    supervisor: Any | None = None
-    sample: SensorSample | None = field(default=None, init=False)
-    timeouts: dict[str, int] = field(default_factory=dict, init=False)
-    stale: dict[str, int] = field(default_factory=dict, init=False)
-    missed: dict[str, int] = field(default_factory=dict, init=False)
-    steps: int = field(default=0, init=False)
-
-    def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ParamError("mode", self.mode, "one of " + ", ".join(MODES))
-        for axis in self.axes:
+    def __init__(
+        self,
+        plant: Any,
+        axes: tuple[str, ...] = AXES,
+        mode: str = "lockstep",
+        x0: float = 0.0,
+        supervisor: Any | None = None,
+        faults: Any = (),
+        seed: int = 0,
+        volts_of: Any | None = None,
+    ) -> None:
+        if mode not in MODES:
+            raise ParamError("mode", mode, "one of " + ", ".join(MODES))
+        for axis in axes:
             if axis not in AXES:
                 raise ParamError("axes", axis, "one of " + ", ".join(AXES))
+        self.plant = plant
+        self.axes = tuple(axes)
+        self.mode = mode
+        self.x0 = x0
+        self.supervisor = supervisor
+        self.injector = None
+        if faults:
+            from .faults import FaultInjector
+
+            self.injector = FaultInjector(faults, plant, seed=seed, active_axes=self.axes)
+        elif supervisor is not None and volts_of is None and hasattr(plant, "params"):
+            from .faults import SensorScaling
+
+            volts_of = SensorScaling(plant.params).volts
+        self._volts_of = volts_of
+        self.sample: SensorSample | None = None
+        self.k = 0
+        self.steps = 0
         self.timeouts = dict.fromkeys(self.axes, 0)
         self.stale = dict.fromkeys(self.axes, 0)
         self.missed = dict.fromkeys(self.axes, 0)
-        self._hold = dict.fromkeys(AXES, NEUTRAL_V)  # written at the last tick, held now
-        self._answer: dict[str, float] = {}  # answers for the coming tick
+        self.silenced = dict.fromkeys(self.axes, 0)
+        self._hold = dict.fromkeys(AXES, NEUTRAL_V)  # what the DAQ holds during the coming step
+        self._answer: dict[str, float] = {}  # valid answers to the current sample (u_k)
+        self._answered: set[str] = set()  # axes that answered it (valid or not)
         self._answer_stamp = dict.fromkeys(self.axes, -1)  # newest accepted stamp per axis
 
     @property
@@ -195,38 +276,50 @@ class LockstepCore:
 
     @property
     def held(self) -> dict[str, float]:
-        """The voltages the DAQ holds during the current step (u_{k-1})."""
+        """The voltages the DAQ holds during the current step (u_{k-1}, after the supervisor)."""
         return dict(self._hold)
 
     def reset(self) -> SensorSample:
-        """Sample s_0; every axis back to the neutral 5 V, counters kept."""
+        """Sample s_0 (faults applied); every axis back to the neutral 5 V, counters kept."""
         self._hold = dict.fromkeys(AXES, NEUTRAL_V)
         self._answer = {}
+        self._answered = set()
         self._answer_stamp = dict.fromkeys(self.axes, -1)
-        self.sample = self.plant.reset(x0=self.x0)
-        self._check(self.sample)
-        return self.sample
+        self.k = 0
+        return self._begin(self.plant.reset(x0=self.x0))
 
-    def safe_outputs(self) -> tuple[float, float]:
-        """What a real rig would hold after a stop: the valve-safe 5 V on both axes."""
-        self._hold = dict.fromkeys(AXES, NEUTRAL_V)
-        self._answer = {}
-        return NEUTRAL_V, NEUTRAL_V
+    def _begin(self, s: SensorSample) -> SensorSample:
+        """Cycle k starts (runner order): faults on the sample, supervisor check, tick-k output."""
+        volts = None
+        if self.injector is not None:
+            s, volts = self.injector.sample(self.k, s)
+        elif self._volts_of is not None:
+            volts = self._volts_of(s)
+        if self.supervisor is not None:
+            self.supervisor.check_sample(s, volts)
+            u_l, u_r = self.supervisor.outputs(s.stamp_ns)  # u_{k-1} after the rules, tick k
+            self._hold = {"linear": u_l, "rotary": u_r}
+        self.sample = s
+        return s
+
+    def silent(self, axis: str) -> bool:
+        """An injected ``controller_silent`` fault mutes ``axis`` at the current sample."""
+        return self.injector is not None and self.injector.silent(self.k, axis)
 
     def offer(self, axis: str, stamp_ns: int, u_v: float) -> str:
-        """Take one controller answer; returns ``accepted``, ``stale``, ``inactive`` or ``invalid``.
+        """Take one controller answer; returns ``accepted``, ``stale``, ``silent``, ``inactive`` or ``invalid``.
 
         Lockstep accepts only ``stamp_ns`` == the current sample's stamp (a
         second answer to the same sample replaces the first); realtime takes
-        the newest answer not older than one already accepted.
+        the newest answer not older than one already accepted. With a
+        supervisor every accepted answer goes to it as is (NaN included: it
+        refuses and trips); without one a non-finite answer is dropped and
+        the previous command held, as a DAQ would.
         """
         if self.sample is None:
             raise RuntimeError("LockstepCore.offer before reset()")
         if axis not in self.axes:
             return "inactive"
-        if not math.isfinite(u_v):
-            self.stale[axis] += 1
-            return "invalid"
         if self.mode == "lockstep":
             if stamp_ns != self.sample.stamp_ns:
                 self.stale[axis] += 1
@@ -234,29 +327,36 @@ class LockstepCore:
         elif stamp_ns < self._answer_stamp[axis] or stamp_ns > self.sample.stamp_ns:
             self.stale[axis] += 1
             return "stale"
+        if self.silent(axis):
+            self.silenced[axis] += 1
+            return "silent"
+        u = float(u_v)
+        if self.injector is not None:
+            u = self.injector.command(self.k, axis, u)
         self._answer_stamp[axis] = stamp_ns
+        self._answered.add(axis)
         if self.supervisor is not None:
-            self.supervisor.command(axis, float(u_v), stamp_ns)
-            self._answer[axis] = float(u_v)
-        else:
-            self._answer[axis] = min(max(float(u_v), U_MIN_V), U_MAX_V)
+            self.supervisor.command(axis, u, stamp_ns)
+        elif not math.isfinite(u):
+            return "invalid"
+        self._answer[axis] = u
         return "accepted"
 
     @property
     def complete(self) -> bool:
-        """Every active axis has answered the current sample."""
-        return all(axis in self._answer for axis in self.axes)
+        """Every active axis has answered the current sample (or is muted by a fault)."""
+        return not self.waiting_for
 
     @property
     def waiting_for(self) -> tuple[str, ...]:
-        return tuple(axis for axis in self.axes if axis not in self._answer)
+        return tuple(a for a in self.axes if a not in self._answered and not self.silent(a))
 
     def advance(self) -> SensorSample:
         """Step the plant k -> k+1 under the held u_{k-1}; then hold the answers u_k.
 
         An axis without an answer keeps its previous command (the DAQ holds
-        its last output) and is counted: ``timeouts`` in lockstep, ``missed``
-        in realtime.
+        its last output; the supervisor's watchdog decides when that is too
+        old) and is counted: ``timeouts`` in lockstep, ``missed`` in realtime.
         """
         if self.sample is None:
             raise RuntimeError("LockstepCore.advance before reset()")
@@ -265,26 +365,29 @@ class LockstepCore:
                 self.timeouts[axis] += 1
             else:
                 self.missed[axis] += 1
-        s = self.plant.step(self._hold["linear"], self._hold["rotary"])
+        u_l, u_r = self._hold["linear"], self._hold["rotary"]
+        if self.injector is not None:
+            u_l, u_r = self.injector.valves(self.k, u_l, u_r)
+        s = self.plant.step(u_l, u_r)
         self.steps += 1
-        self.sample = s
-        self._check(s)
-        if self.supervisor is not None:
-            u_l, u_r = self.supervisor.outputs(s.stamp_ns)  # written at tick k+1
-            self._hold = {"linear": u_l, "rotary": u_r}
-        else:
+        if self.supervisor is None:
             self._hold.update(self._answer)
         self._answer = {}
-        return s
+        self._answered = set()
+        self.k += 1
+        return self._begin(s)
 
-    def _check(self, s: SensorSample) -> None:
-        if self.supervisor is not None:
-            self.supervisor.check_sample(s)
+    def safe_outputs(self) -> tuple[float, float]:
+        """What a real rig would hold after a stop: the valve-safe 5 V on both axes."""
+        self._hold = dict.fromkeys(AXES, NEUTRAL_V)
+        self._answer = {}
+        self._answered = set()
+        return NEUTRAL_V, NEUTRAL_V
 
     def counters(self) -> dict[str, int]:
         """Flat counters for diagnostics: ``steps``, ``timeouts.linear``, ..."""
         out = {"steps": self.steps}
-        for name in ("timeouts", "stale", "missed"):
+        for name in ("timeouts", "stale", "missed", "silenced"):
             for axis, n in getattr(self, name).items():
                 out[f"{name}.{axis}"] = n
         return out

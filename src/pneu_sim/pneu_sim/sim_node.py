@@ -43,7 +43,14 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 
-from .lockstep import LockstepCore, SimNodeParams, active_axes, fill_sample_messages
+from .lockstep import (
+    LockstepCore,
+    SimNodeParams,
+    active_axes,
+    fill_sample_messages,
+    load_faults,
+    safety_statuses,
+)
 from .params import load_plant
 from .plant import Plant
 
@@ -78,7 +85,10 @@ class SimNode(Node):
             sup = SafetySupervisor(load_safety_params(p.safety_file or None), sample_time_s=plant.T)
         self.supervisor = sup
         self.axes = active_axes(p.axes)
-        self.core = LockstepCore(plant, axes=self.axes, mode=p.mode, x0=p.x0, supervisor=sup)
+        faults = load_faults(p.faults, p.faults_file)
+        self.core = LockstepCore(
+            plant, axes=self.axes, mode=p.mode, x0=p.x0, supervisor=sup, faults=faults, seed=p.seed
+        )
         self.n_end = round(p.duration_s / plant.T) if p.duration_s > 0 else 0
         self.done = Future()
         self.halted = ""  # e-stopped without a supervisor: time stands still
@@ -160,6 +170,7 @@ class SimNode(Node):
     def _advance(self) -> None:
         if self.halted or self.done.done():
             return
+        self._publish_safety_events()  # end of cycle k, stamped with sample k (the runner's layout)
         if self.n_end and self.core.sample.k + 1 >= self.n_end:
             self._finish()
             return
@@ -220,6 +231,7 @@ class SimNode(Node):
 
     def _finish(self) -> None:
         self.core.safe_outputs()
+        self._publish_safety_events()
         self._publish_diagnostics()
         c = self.core.counters()
         self.get_logger().info(f"finished after {self.core.sample.k + 1} samples; counters {c}")
@@ -245,6 +257,19 @@ class SimNode(Node):
             if was and self.lockstep and self.started:
                 self._advance()
         return response
+
+    def _publish_safety_events(self) -> None:
+        if self.supervisor is None:
+            return
+        events = self.supervisor.events()
+        if events:
+            statuses = safety_statuses("pneu_sim", events)
+            stamp = self.core.sample.stamp_ns
+            self.diag_pub.publish(
+                fill_diagnostic_array(
+                    DiagnosticArray(), DiagnosticStatus, KeyValue, stamp, statuses
+                )
+            )
 
     def _publish_diagnostics(self) -> None:
         c = self.core.counters()
@@ -279,22 +304,15 @@ class SimNode(Node):
                         {"causes": ",".join(st.causes)},
                     )
                 )
-            for ev in self.supervisor.events():
-                level = {"OK": 0, "WARN": 1, "ERROR": 2}[ev.level]
-                statuses.append(
-                    DiagStatus(
-                        level,
-                        f"pneu_sim: safety event {ev.rule}",
-                        ev.message,
-                        "pneu_sim",
-                        dict(ev.values),
-                    )
-                )
+        if self.lockstep:  # sim time, as every other node of a lockstep run stamps
+            now = self.core.sample.stamp_ns if self.core.sample is not None else 0
+        else:
+            now = self.get_clock().now().nanoseconds
         out = fill_diagnostic_array(
             DiagnosticArray(),
             DiagnosticStatus,
             KeyValue,
-            self.get_clock().now().nanoseconds,
+            now,
             statuses,
         )
         self.diag_pub.publish(out)
