@@ -35,6 +35,7 @@ from pneu_control import session  # noqa: E402
 
 DURATION_S = 1.0
 WINDOW_S = 0.5
+FAULT = "sensor_dropout:sensor=x,start_s=0.8,duration_s=0.01"  # the supervisor holds it safe
 
 
 @pytest.fixture
@@ -63,6 +64,7 @@ def test_lockstep_graph_through_the_node_modules_equals_the_runner(world, tmp_pa
                 "safety": True,  # config/safety.yaml, as the runner
                 "lockstep.min_subscribers": 2,
                 "lockstep.settle_s": 0.0,  # the stand-in matches connections at once
+                "faults": FAULT,
             },
             "/linear_controller": {
                 "mode": "lockstep",
@@ -105,9 +107,13 @@ def test_lockstep_graph_through_the_node_modules_equals_the_runner(world, tmp_pa
         duration_s=DURATION_S,
         seed=2,
         window_start_s=WINDOW_S,
+        faults=[FAULT],
     )
-    ref = run(spec).metrics["linear"]
+    result = run(spec)
+    assert result.safety_counters["trips"] >= 1
+    ref = result.metrics["linear"]
     res = analyze(tmp_path / "run.mcap", window=WindowSpec(kind="fixed", t_start_s=WINDOW_S))
+    assert res.faults == result.fault_intervals
     got = res.metrics["linear"]
     assert got.n_samples == ref.n_samples > 0
     assert got.e_max == pytest.approx(ref.e_max, abs=1e-9, rel=0)
