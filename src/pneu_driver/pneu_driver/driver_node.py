@@ -158,10 +158,11 @@ class DriverNode(Node):
 
     # -- executor thread ------------------------------------------------------
     def _publish_events(self) -> None:
-        statuses = []
+        """Supervisor transitions, one DiagnosticArray per sample stamp (``pneu analyze`` reads them)."""
+        by_stamp: dict[int, list] = {}
         while self.events:
             e = self.events.popleft()
-            statuses.append(
+            by_stamp.setdefault(e.stamp_ns, []).append(
                 DiagStatus(
                     _LEVEL[e.level],
                     f"pneu_driver: safety {e.axis} {e.rule}",
@@ -170,8 +171,8 @@ class DriverNode(Node):
                     dict(e.values),
                 )
             )
-        if statuses:
-            self._publish(statuses)
+        for stamp, statuses in by_stamp.items():
+            self._publish(statuses, stamp)
 
     def _on_command(self, msg: JointState, axis: str) -> None:
         try:
@@ -220,8 +221,8 @@ class DriverNode(Node):
         if self.thread is not None and not running and not self.done.done():
             self.done.set_result(err)  # the loop ended (error or stop): leave spin
 
-    def _publish(self, statuses) -> None:
-        now = self.get_clock().now().nanoseconds
+    def _publish(self, statuses, stamp_ns: int | None = None) -> None:
+        now = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
         self.diag_pub.publish(
             fill_diagnostic_array(DiagnosticArray(), DiagnosticStatus, KeyValue, now, statuses)
         )
