@@ -41,7 +41,7 @@ def test_chain_eso_converges_on_exact_zoh_plant_with_constant_disturbance():
     x = np.array([0.0, 800.0, 0.0, f])  # θ (rpm·s), ω (rpm), ω̇, f
     eso.reset(0.0, 0.0)
     rng = np.random.default_rng(1)
-    for k in range(3000):
+    for _k in range(3000):
         u = 1.7 + 0.1 * rng.standard_normal()
         x = phi @ x + gam * b0 * u
         eso.update(x[0], u)

@@ -1,0 +1,109 @@
+"""ESO-SMC+ on the physics twin against the re-tuned ESO-SMC; robustness; bumpless switching.
+
+Short runs (a few simulated seconds). ESO-SMC runs with the re-tuned set
+(config/controllers_retuned.yaml); ESO-SMC+ with its defaults in
+config/controllers.yaml (hand-picked from sweeps at the paper's operating
+points: the equal-effort ``pneu tune`` grid does not find them, see the
+module docstring of pneu_control.algorithms.eso_smc_plus).
+"""
+
+import numpy as np
+import pytest
+from pneu_control.axis import AxisController
+from pneu_control.ctrl_params import load_controller_params
+from pneu_control.runner import run
+from pneu_msgs_py.params import with_updates
+from pneu_msgs_py.paths import config_file
+from pneu_msgs_py.samples import NEUTRAL_V
+from pneu_sim.params import load_plant
+from pneu_sim.plant import Plant
+
+from pneu_control import session
+
+RETUNED = config_file("controllers_retuned.yaml")
+DEFAULTS = config_file("controllers.yaml")
+SINE = "sine:amplitude=20,frequency_hz=0.5,offset=0"  # window opens after 2 periods (4 s)
+SPEED = "constant:value=800"
+
+
+def _metrics(axis, controller, reference, duration, seed=0, plant=None):
+    cf = DEFAULTS if controller == "eso_smc_plus" else RETUNED
+    spec = session.build_spec(
+        axes=(axis,),
+        controller=controller,
+        reference=reference,
+        duration_s=duration,
+        seed=seed,
+        controllers_file=cf,
+        plant=plant,
+    )
+    return run(spec).metrics[axis]
+
+
+def _corner(mass=1.0, supply=1.0):
+    p = load_plant(None)
+    return with_updates(
+        p,
+        {
+            "linear.M": p.linear.M * mass,
+            "supply.p_s_linear": p.supply.p_s_linear * supply,
+            "supply.p_s_rotary": p.supply.p_s_rotary * supply,
+        },
+    )
+
+
+@pytest.mark.parametrize("supply", [1.0, 0.7, 1.3])
+def test_angle_observer_beats_eso_smc_at_800_rpm(supply):
+    # the rotary twin has no random part (encoder counts, deterministic ripple): one seed
+    plant = _corner(supply=supply)
+    plus = _metrics("rotary", "eso_smc_plus", SPEED, 4.0, plant=plant)
+    base = _metrics("rotary", "eso_smc", SPEED, 4.0, plant=plant)
+    assert plus.e_max < base.e_max
+    assert plus.rmse < base.rmse
+
+
+@pytest.mark.parametrize(("mass", "supply"), [(0.7, 1.0), (1.3, 1.0), (1.0, 0.7), (1.0, 1.3)])
+def test_stable_with_mass_and_supply_off_by_30_percent(mass, supply):
+    plant = _corner(mass, supply)
+    lin = _metrics("linear", "eso_smc_plus", SINE, 6.0, plant=plant)
+    assert lin.rmse < 0.8  # mm (nominal 0.41 on this 0.5 Hz sine; ESO-SMC 0.37)
+    assert lin.e_max < 2.5
+    rot = _metrics("rotary", "eso_smc_plus", SPEED, 4.0, plant=plant)
+    assert rot.e_max < 1.5  # rpm, per-revolution mean speed (nominal 0.6)
+
+
+@pytest.mark.parametrize("axis", ["linear", "rotary"])
+def test_switching_to_and_from_eso_smc_plus_is_bumpless(axis):
+    ref = {"reference.kind": "constant", "reference.value": 800.0}
+    if axis == "linear":
+        ref = {"reference.kind": "sine", "reference.amplitude": 20.0, "reference.frequency_hz": 0.5}
+    base = with_updates(load_controller_params(axis, RETUNED), {**ref, "algorithm": "eso_smc"})
+    plus = with_updates(
+        load_controller_params(axis, DEFAULTS), {**ref, "algorithm": "eso_smc_plus"}
+    )
+    ctrl = AxisController(axis, base)
+    plant = Plant(load_plant(None), seed=0)
+    s = plant.reset()
+    u_hold = NEUTRAL_V
+    switches = {1500: plus, 3000: base, 4500: plus}
+    u = np.empty(6000)
+    err = np.empty(6000)
+    for k in range(6000):
+        if k in switches:
+            ctrl.set_params(switches[k])
+        u[k] = ctrl.update(s)
+        err[k] = ctrl.state.error
+        s = plant.step(*((u_hold, NEUTRAL_V) if axis == "linear" else (NEUTRAL_V, u_hold)))
+        u_hold = u[k]
+    du = np.abs(np.diff(u))
+    typical = np.percentile(du[500:1490], 99)
+    for k in switches:
+        # the command never jumps at a switch: the step there is an ordinary one
+        assert du[k - 1] <= max(2.0 * typical, 1e-3)
+        assert ctrl.algorithm in ("eso_smc", "eso_smc_plus")
+    if axis == "linear":
+        assert np.max(np.abs(err[1000:])) * 1e3 < 2.5  # mm, raw (noisy) error
+    else:  # speed over 75 ms (one revolution): quantisation and vane ripple averaged out
+        w = np.convolve(err[1400:], np.ones(75) / 75.0, mode="valid") * 60.0 / (2.0 * np.pi)
+        assert np.max(np.abs(w)) < 8.0  # leaving ESO-SMC+ for ESO-SMC: ≈ 6 rpm, 0.3 s
+    assert ctrl.algorithm == "eso_smc_plus"
