@@ -436,11 +436,13 @@ class SafetySupervisor:
             key = rule if rule == "overspeed" else f"{rule}:{sensor}"
             present[(SENSOR_AXIS[sensor], key)] = (message, {"sensor": sensor, **values})
 
-        for name, sensor in _FIELD_SENSOR.items():
-            v = getattr(sample, name)
-            if not math.isfinite(v):
-                flag(sensor, "non_finite", f"{name} is {v}", value=v)
-        if raw_volts is not None:
+        s = sample
+        if not math.isfinite(s.p_c1 + s.p_c2 + s.p_m1 + s.x + s.theta + s.omega):  # fast screen
+            for name, sensor in _FIELD_SENSOR.items():
+                v = getattr(sample, name)
+                if not math.isfinite(v):
+                    flag(sensor, "non_finite", f"{name} is {v}", value=v)
+        if raw_volts is not None and not self._volts_live(raw_volts):
             for sensor, v in zip(_ANALOG, raw_volts):
                 lo, hi = self._live[sensor]
                 if not math.isfinite(v):
@@ -497,6 +499,13 @@ class SafetySupervisor:
         self._check_encoder(int(sample.counts), now, flag)
         self._have_sample = True
         self._update_group("sensor", present, now)
+
+    def _volts_live(self, raw_volts: tuple[float, ...]) -> bool:
+        """Fast screen: all four voltages finite and inside their live ranges (NaN fails)."""
+        plo, phi = self.params.pressure_live_v
+        llo, lhi = self.params.laser_live_v
+        v0, v1, v2, v3 = raw_volts
+        return plo <= v0 <= phi and plo <= v1 <= phi and plo <= v2 <= phi and llo <= v3 <= lhi
 
     def _check_encoder(self, c: int, now: int, flag: Any) -> None:
         p = self.params
@@ -612,6 +621,9 @@ class SafetySupervisor:
         d_brake = v * v / (2.0 * p.max_decel_m_s2)
         reach_hi = x + (d_brake if v > 0.0 else 0.0)
         reach_lo = x - (d_brake if v < 0.0 else 0.0)
+        zone = self._zone
+        if not (zone["hi"] or zone["lo"]) and self._x_lo < reach_lo and reach_hi < self._x_hi:
+            return  # hot path: far from both limits, nothing to change
         for side, inside, leave in (
             ("hi", reach_hi >= self._x_hi, reach_hi < self._x_hi - p.stroke_hyst_m),
             ("lo", reach_lo <= self._x_lo, reach_lo > self._x_lo + p.stroke_hyst_m),
