@@ -41,6 +41,7 @@ class PaperRow:
     window_s: list[float]
     run_dir: str
     in_band: bool | None = None
+    safety_trip: str | None = None  # first ERROR of the supervisor: "rule at t s", else None
 
     def to_dict(self) -> dict[str, Any]:
         d = dict(self.__dict__)
@@ -67,8 +68,22 @@ def runs_for(exp: Experiment) -> list[tuple[str, str]]:
     return pairs
 
 
+def _first_trip(result: RunResult, axis: str) -> str | None:
+    """The supervisor's first ERROR on ``axis`` ("overspeed at 0.412 s"), if any."""
+    for ev in result.safety_events:
+        if ev.level == "ERROR" and ev.axis in (axis, "all"):
+            return f"{ev.rule} at {ev.stamp_ns * 1e-9:.3f} s"
+    return None
+
+
 def row_from_metrics(
-    exp: Experiment, controller: str, gains: str, m: AxisMetrics, run_dir: str, band_ok=None
+    exp: Experiment,
+    controller: str,
+    gains: str,
+    m: AxisMetrics,
+    run_dir: str,
+    band_ok=None,
+    safety_trip: str | None = None,
 ):
     paper = exp.paper.get(controller, (None, None))
     return PaperRow(
@@ -84,6 +99,7 @@ def row_from_metrics(
         window_s=m.window_s,
         run_dir=run_dir,
         in_band=band_ok,
+        safety_trip=safety_trip,
     )
 
 
@@ -103,9 +119,10 @@ def run_paper(
             run_dir = out / run_dir_name(exp, controller, gains)
             result, m = runner(exp, controller, gains, run_dir)
             band_ok = None
-            if exp.band is not None:
+            if exp.band is not None and math.isfinite(m.e_max):
                 band_ok = _in_band(result, exp, m)
-            row = row_from_metrics(exp, controller, gains, m, run_dir.name, band_ok)
+            trip = _first_trip(result, exp.axis)
+            row = row_from_metrics(exp, controller, gains, m, run_dir.name, band_ok, trip)
             rows.append(row)
             log(
                 f"  {exp.id:18s} {controller:12s} {gains:8s} e_max {m.e_max:9.4f} {m.unit:3s} "
@@ -148,6 +165,8 @@ def render_markdown(rows: list[PaperRow]) -> str:
         band = ""
         if r.in_band is not None:
             band = " (in 696–702 band)" if r.in_band else " (leaves 696–702 band)"
+        if r.safety_trip:
+            band += f" (safety trip: {r.safety_trip})"
         lines.append(
             f"| {r.id} | {r.controller} | {r.gains} | {_fmt(r.e_max)} {r.unit}{band} | {_fmt(r.paper_e_max)} | "
             f"{_fmt(d['ratio_e_max'], 2)} | {_fmt(r.rmse)} {r.unit} | {_fmt(r.paper_rmse)} | "
