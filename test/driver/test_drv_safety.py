@@ -41,7 +41,7 @@ class Rig:
             stamp_ns=stamp,
             p_c1=250000.0 + wiggle,
             p_c2=240000.0 - wiggle,
-            p_m1=300000.0 + wiggle,
+            p_m1=180000.0 + wiggle,  # below stall_inlet_pa: a motor at rest is plausible
             x=self.x + 1e-6 * (self.k % 2),
             theta=2 * math.pi * self.counts / 4000,
             omega=0.0,
@@ -356,3 +356,22 @@ def test_events_carry_time_and_string_key_values():
     assert d["values"]["sensor"] == "p_m1" and float(d["values"]["pressure_pa"]) == 9.0e5
     assert all(isinstance(v, str) for _, v in ev.values)
     assert r.sup.events() == []  # drained
+
+
+def test_no_rotation_dead_encoder_or_blocked_rotor():
+    """Inlet above stall_inlet_pa and no count for more than stall_ms -> rotary safe."""
+    p = SafetyParams()
+    r = Rig()
+    high = p.stall_inlet_pa + 1.0
+    for _ in range(int(p.stall_ms) + 1):  # counts frozen for exactly stall_ms: passes
+        out = r.tick(p_m1=high)
+    assert out == (7.0, 6.0)
+    assert r.tick(p_m1=high) == (7.0, 5.0)  # one more period: trips, linear untouched
+    assert ("rotary", "no_rotation") in rules(r.sup.events(), ERROR)
+    # exactly at the pressure threshold, or with counts moving, it never trips
+    r = Rig()
+    for _ in range(200):
+        assert r.tick(p_m1=p.stall_inlet_pa) == (7.0, 6.0)
+    r = Rig(rate=1)
+    for _ in range(200):
+        assert r.tick(p_m1=high) == (7.0, 6.0)

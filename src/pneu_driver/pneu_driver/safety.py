@@ -207,6 +207,24 @@ class SafetyParams:
         hi=1.0e6,
         desc="a pressure above supply + margin is implausible",
     )
+    # dead encoder or blocked rotor
+    stall_inlet_pa: float = param(
+        2.51325e5,
+        unit="Pa",
+        lo=1.0e5,
+        hi=2.0e6,
+        desc="motor inlet pressure (absolute) above which the rotor must turn: 1.5 bar gauge, "
+        "over 2x the Coulomb level M_c/K = 0.128 N*m / 1.87e-6 m^3 = 68 kPa (paper Table 1, twin)",
+    )
+    stall_ms: float = param(
+        50.0,
+        unit="ms",
+        lo=0.0,
+        lo_open=True,
+        hi=1000.0,
+        desc="no encoder count for this long while the inlet is above stall_inlet_pa: "
+        "dead encoder or blocked rotor -> rotary safe",
+    )
     # frozen values and live voltage ranges
     stuck_ms: float = param(
         250.0,
@@ -360,6 +378,9 @@ class SafetySupervisor:
         self._T_ns = round(sample_time_s * 1e9)
         self._wd_ns = round(p.watchdog_ms * 1e6)
         self._stuck_ns = round(p.stuck_ms * 1e6)
+        self._stall_ns = round(p.stall_ms * 1e6)
+        self._stall_c: int | None = None
+        self._stall_since = 0
         half = p.stroke_m / 2.0
         self._x_hi = half - p.stroke_margin_m  # soft-limit boundaries
         self._x_lo = -self._x_hi
@@ -497,8 +518,28 @@ class SafetySupervisor:
         else:
             self._x = math.nan
         self._check_encoder(int(sample.counts), now, flag)
+        self._check_stall(int(sample.counts), sample.p_m1, now, flag)
         self._have_sample = True
         self._update_group("sensor", present, now)
+
+    def _check_stall(self, c: int, p_m1: float, now: int, flag: Any) -> None:
+        """Dead encoder / blocked rotor: inlet able to turn the motor, yet no count for stall_ms.
+
+        Catches what the jump rule cannot: an encoder that stops counting at low
+        speed (a missed count there is within the jump allowance).
+        """
+        if not p_m1 > self.params.stall_inlet_pa or c != self._stall_c:
+            self._stall_c, self._stall_since = c, now
+            return
+        if now - self._stall_since > self._stall_ns:
+            flag(
+                "encoder",
+                "no_rotation",
+                f"no encoder count for {(now - self._stall_since) * 1e-6:.4g} ms with the motor "
+                f"inlet at {p_m1:.6g} Pa (> {self.params.stall_inlet_pa:g} Pa)",
+                inlet_pa=p_m1,
+                still_ms=(now - self._stall_since) * 1e-6,
+            )
 
     def _volts_live(self, raw_volts: tuple[float, ...]) -> bool:
         """Fast screen: all four voltages finite and inside their live ranges (NaN fails)."""
