@@ -217,12 +217,13 @@ class SafetyParams:
         "over 2x the Coulomb level M_c/K = 0.128 N*m / 1.87e-6 m^3 = 68 kPa (paper Table 1, twin)",
     )
     stall_ms: float = param(
-        50.0,
+        20.0,
         unit="ms",
         lo=0.0,
         lo_open=True,
         hi=1000.0,
-        desc="no encoder count for this long while the inlet is above stall_inlet_pa: "
+        desc="no encoder count for this long while the inlet is above stall_inlet_pa (a count "
+        "comes every 1.5 ms even at 10 rpm): "
         "dead encoder or blocked rotor -> rotary safe",
     )
     # frozen values and live voltage ranges
