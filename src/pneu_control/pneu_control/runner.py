@@ -169,13 +169,15 @@ def run(
     period = plant.T
     n = int(round(spec.duration_s / period))
     ctrls = {axis: AxisController(axis, spec.controllers[axis]) for axis in spec.axes}
-    lin = ctrls.get("linear")
-    rot = ctrls.get("rotary")
     rec_samples: list[SensorSample] = []
     rec_state: dict[str, list[tuple[float, ...]]] = {axis: [] for axis in ctrls}
     rec_u: dict[str, list[float]] = {axis: [] for axis in ctrls}
-    rec_lin, rec_rot = rec_state.get("linear", []), rec_state.get("rotary", [])
-    u_lin, u_rot = rec_u.get("linear", []), rec_u.get("rotary", [])
+    # (index into the (linear, rotary) command pair, axis, core, its records), fixed order
+    active = [
+        (AXES.index(axis), axis, ctrls[axis], rec_state[axis], rec_u[axis])
+        for axis in AXES
+        if axis in ctrls
+    ]
     rec_out: list[tuple[float, float]] = []  # what the DAQ held during each step
     rec_truth: list[tuple[float, float]] = []  # (x, omega) true, only with faults
     algorithms = {axis: c.params.algorithm for axis, c in ctrls.items()}
@@ -236,58 +238,29 @@ def run(
             rec_samples.append(s)
             if bag is not None:
                 bag.write_sample(s)
-            if lin is not None:
-                if (inj is not None and inj.silent(k, "linear")) or "linear" in crashed:
-                    rec_lin.append(nan_state)
-                    u_lin.append(math.nan)
-                    u_l = None
-                else:
+            u_new = [NEUTRAL_V, NEUTRAL_V]  # an inactive axis holds the neutral command
+            for i, axis, ctrl, rec_st, rec_u_ in active:
+                u = None
+                if not ((inj is not None and inj.silent(k, axis)) or axis in crashed):
                     try:
-                        u_l = lin.update(s)
+                        u = ctrl.update(s)
                     except Exception as err:  # a crashed controller must not stop the rig
-                        controller_failed("linear", err, stamp)
-                        rec_lin.append(nan_state)
-                        u_lin.append(math.nan)
-                        u_l = None
-                    else:
-                        values = lin.state_values()
-                        if inj is not None:
-                            u_l = inj.command(k, "linear", u_l)
-                        rec_lin.append(values)
-                        u_lin.append(u_l)
-                        if bag is not None:
-                            bag.write_command("linear", stamp, u_l)
-                            bag.write_controller_state("linear", stamp, values, lin.algorithm)
-                        if sup is not None:
-                            sup.command("linear", u_l, stamp)
-            else:
-                u_l = NEUTRAL_V
-            if rot is not None:
-                if (inj is not None and inj.silent(k, "rotary")) or "rotary" in crashed:
-                    rec_rot.append(nan_state)
-                    u_rot.append(math.nan)
-                    u_r = None
+                        controller_failed(axis, err, stamp)
+                if u is None:  # silent or crashed: no command this cycle
+                    rec_st.append(nan_state)
+                    rec_u_.append(math.nan)
                 else:
-                    try:
-                        u_r = rot.update(s)
-                    except Exception as err:
-                        controller_failed("rotary", err, stamp)
-                        rec_rot.append(nan_state)
-                        u_rot.append(math.nan)
-                        u_r = None
-                    else:
-                        values = rot.state_values()
-                        if inj is not None:
-                            u_r = inj.command(k, "rotary", u_r)
-                        rec_rot.append(values)
-                        u_rot.append(u_r)
-                        if bag is not None:
-                            bag.write_command("rotary", stamp, u_r)
-                            bag.write_controller_state("rotary", stamp, values, rot.algorithm)
-                        if sup is not None:
-                            sup.command("rotary", u_r, stamp)
-            else:
-                u_r = NEUTRAL_V
+                    values = ctrl.state_values()
+                    if inj is not None:
+                        u = inj.command(k, axis, u)
+                    rec_st.append(values)
+                    rec_u_.append(u)
+                    if bag is not None:
+                        bag.write_command(axis, stamp, u)
+                        bag.write_controller_state(axis, stamp, values, ctrl.algorithm)
+                    if sup is not None:
+                        sup.command(axis, u, stamp)
+                u_new[i] = u
             if sup is not None:
                 events = sup.events()
                 if events:
@@ -300,6 +273,7 @@ def run(
             else:
                 s = plant.step(u_hold_l, u_hold_r)  # tick k -> k+1 under u_{k-1}
             if sup is None:  # no supervisor: the DAQ holds the last value it could write
+                u_l, u_r = u_new
                 if u_l is not None and math.isfinite(u_l):
                     u_hold_l = u_l
                 if u_r is not None and math.isfinite(u_r):
