@@ -229,6 +229,9 @@ class AxisController:
                 return self._u_last
             self._theta = th_a
             self._alg.theta = th_a
+        if getattr(self._alg, "uses_pressures", False):  # chamber pressures, Pa abs
+            self._alg.p_c1, self._alg.p_c2 = sample.p_c1, sample.p_c2
+        self._p_c = (sample.p_c1, sample.p_c2)
         if self._pending is not None or not self._started:
             return self._switch(y, th, rp, rdp, rddp)
         if self._td_on:  # the TD runs on the reference whatever the algorithm
@@ -316,6 +319,8 @@ class AxisController:
         new_alg.pending = self._u_hist
         if getattr(new_alg, "uses_theta", False):
             new_alg.theta = self._theta
+        if getattr(new_alg, "uses_pressures", False):
+            new_alg.p_c1, new_alg.p_c2 = self._p_c
         if not started:  # cold start: TD from the measured speed/position (soft start)
             td.reset(y, 0.0)
             if self._td_on:

@@ -19,9 +19,9 @@ from .robustness import ROBUSTNESS_VARIANTS, scaled_plant
 from .runner import run as run_spec
 
 NAME = "tune"
-HELP = "re-identify b0 from the twin's step response and re-tune PID, LADRC, ESO-SMC (grid search)"
+HELP = "re-identify b0 from the twin's step response and re-tune PID, LADRC, ESO-SMC, ESO-SMC+ (grid search)"
 
-ALGORITHMS = ("pid", "ladrc", "eso_smc")
+ALGORITHMS = ("pid", "ladrc", "eso_smc", "eso_smc_plus")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

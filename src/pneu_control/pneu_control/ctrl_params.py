@@ -282,8 +282,78 @@ class EsoSmcPlusParams:
         False,
         desc="predict the ESO state over the transport delay with the commands already sent",
     )
+    linear_model: str = param(
+        "position",
+        choices=("position", "force"),
+        desc="linear: ESO-SMC on the laser position (ẍ = f + b0 u), or the cascade on the "
+        "measured chamber pressures: the surface asks for a piston force (with the Eq. 2 "
+        "friction), an inner loop makes the pressure force F_p (Eq. 1) follow it",
+    )
+    friction_feedforward: bool = param(
+        False,
+        desc="linear_model position: feed the Eq. 2 friction of the reference speed forward "
+        "through the pressure rate, u_ff = (d/dt) F_f(ṙ) / b_F",
+    )
+    b_F: float = param(
+        500.0,
+        unit="N/s/V",
+        desc="linear_model force: rate of the pressure force per volt of valve command",
+        **_POS,
+        source="pneu tune (slope of F_p after ±1 V steps)",
+    )
+    force_bandwidth: float = param(
+        150.0,
+        unit="rad/s",
+        desc="linear_model force: bandwidth k_F of the inner pressure-force loop",
+        **_POS,
+        source="rule: k_F = 1/(3 τ_p), τ_p = 2.3 ms pressure-sensor lag (Huba 511)",
+    )
+    n_poly: float = param(
+        1.2,
+        unit="-",
+        desc="polytropic index of the chamber process",
+        lo=1.0,
+        hi=1.4,
+        source="as the twin (plant.yaml ambient.n_poly)",
+    )
+    V_1d: float = param(
+        1.1e-5, unit="m^3", desc="dead volume chamber 1", **_POS, source="paper Table 1"
+    )
+    V_2d: float = param(
+        0.6e-5, unit="m^3", desc="dead volume chamber 2", **_POS, source="paper Table 1"
+    )
+    L: float = param(0.15, unit="m", desc="stroke", **_POS, source="paper Table 1")
+    A_c1: float = param(
+        8.04e-4, unit="m^2", desc="cap-side piston area (Eq. 1)", **_POS, source="paper Table 1"
+    )
+    A_c2: float = param(
+        6.912e-4, unit="m^2", desc="rod-side annulus area (Eq. 1)", **_POS, source="paper Table 1"
+    )
+    M: float = param(0.28, unit="kg", desc="moving mass (Eq. 1)", **_POS, source="paper Table 1")
+    p_a: float = param(
+        101325.0,
+        unit="Pa",
+        desc="ambient pressure on the rod (errata Eq. 1)",
+        **_POS,
+        source="ISO 2533",
+    )
+    A_f: float = param(
+        2.95, unit="N", desc="Coulomb friction level (Eq. 2)", **_NONNEG, source="paper Eq. 2 fit"
+    )
+    c_v: float = param(
+        88.81, unit="N*s/m", desc="viscous friction (Eq. 2)", **_NONNEG, source="paper Eq. 2 fit"
+    )
+    v_s: float = param(
+        10.0,
+        unit="mm/s",
+        desc="sign smoothing of the Coulomb term, A_f tanh(ẋ/v_s)",
+        **_POS,
+        source="order of the seal Stribeck velocity (plant-parameters.md)",
+    )
 
     def _check(self) -> None:
+        if not self.A_c2 < self.A_c1:
+            raise ParamError("A_c2", self.A_c2, f"(0, A_c1 = {self.A_c1:g}) m^2")
         du, fl = self.valve_du_table, self.valve_flow_table
         if len(du) < 2 or len(du) != len(fl):
             raise ParamError(

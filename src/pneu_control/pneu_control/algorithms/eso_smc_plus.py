@@ -56,11 +56,58 @@ reaching law's |s| > Δ condition of ESO-SMC is not used on the angle: e_θ is
 a measured quantity, and with |ṡ| ≤ ε the loop recovers it at a speed offset
 of at most ε/λ².
 
+4. Friction feed-forward through the pressure rate (``friction_feedforward``,
+   linear, ``linear_model: position``). The valve sets the *rate* of the
+   chamber pressures, Ḟ_p ≈ b_F u (b_F in N/s/V), so the known Eq. 2 friction
+   of the reference speed, F_f(ṙ) = A_f tanh(ṙ/v_s) + c_v ṙ, is fed forward as
+   its rate::
+
+       u_ff(k) = (F_f(ṙ_k) − F_f(ṙ_{k−1})) / (T b_F)      (Σ u_ff T b_F = ΔF_f exactly)
+
+   At each reversal this builds the 2 A_f force swing the ESO would otherwise
+   have to discover from the position error. The ESO is fed the law's part
+   only (u_applied − u_ff of the same period): the FF's effect is physics it
+   observes, not b0·u_ff. b_F = 500 N/s/V: slope of the measured pressure force
+   after ±1 V steps on the twin (1.8·10⁶ mm/s³/V × M, 3–10 ms after the step).
+
+5. Pressure cascade (``linear_model: force``, experimental, off). The rig
+   measures both chamber pressures, so the piston force is a measurement
+   (errata Eq. 1)::
+
+       F_p = A_c1 p_c1 − A_c2 p_c2 − A_r p_a,     A_r = A_c1 − A_c2
+
+   Observer: the 3-state ESO on the laser with the measured acceleration as a
+   known input, ẍ = f + (F_p − F_f(ẋ̂))/M (f: sensor offsets, static friction,
+   model error). Outer loop: Eq. 26–30 asking for an acceleration a_d, i.e. a
+   force F_d = M (a_d − r̈) + M r̈ + F_f(ṙ) (a_d includes −f̂). Inner loop, from
+   the chamber equations (volume terms)::
+
+       Ḟ_p = b_F u − n (A_c1² p_c1/V_1 + A_c2² p_c2/V_2) ẋ
+       u = [Ḟ_r + k_F (F_d − F_p) + n (A_c1² p_c1/V_1 + A_c2² p_c2/V_2) ẋ̂] / b_F
+
+   (Ḟ_r: rate of the reference's own force M r̈ + F_f(ṙ); the feedback part is
+   not differentiated, it carries the laser noise.) Measured on the twin: the
+   pressure-aided velocity estimate is 2.3× better than the laser ESO's at the
+   same ω0 (6.8 vs 15.4 mm/s rms, tested), but the cascade needs the valve
+   linearisation (the flow curve's slope varies 4×; k_F = 200 rad/s already
+   limit-cycles against the 2.3 ms sensor lag and the delay), and its position
+   error stays above ESO-SMC's (best found 0.63/0.70 mm e_max mean/worst,
+   λ 120, ω0 60): it stick-slips at low speed after each reversal.
+
 What did not work (measured, not kept): friction feed-forward of Eq. 2
 through b0 (f_k = −F_f(ṙ)/M asks for A_f/(M b0) ≈ 4 V: on this plant u sets
-the *rate* of the chamber pressures, so a force is not b0·u), and a 4-state
-ESO on the laser position (x‴ = f + b0 u), which needs the acceleration from
-a 86 µm-noise signal.
+the *rate* of the chamber pressures, so a force is not b0·u; item 4 is the
+rate form); a 4-state ESO on the laser position (x‴ = f + b0 u), which needs
+the acceleration from a 86 µm-noise signal; the same 4-state ESO with the
+pressure acceleration as a second output and the law one order up
+(s = ë + 2λė + λ²e on x‴ = f + b3 u): mm-level errors on the twin (valve dead
+band, stick-slip, b3 varies 3× with the opening); correcting the 3-state
+ESO's f̂ from the pressure acceleration: an undamped acceleration loop (the
+model's b0·u is an acceleration, the plant's is a force rate). Rotary: the
+angle observer limit-cycles at 1100 rpm (≈ 20 Hz, ±30 rpm; not the 73 Hz
+vane ripple) for every (λ, ω0, b0, delay compensation) tried; an LMS
+canceller of the n_vanes·θ ripple in the angle and a smaller angle-error
+weight did not remove it. Open.
 
 Delay compensation (optional, as in ESO-SMC): the law acts on the ESO state
 predicted over the transport delay with the commands already sent.
@@ -169,6 +216,29 @@ class EsoSmcPlus:
             else _Identity()
         )
         self.lin_id = not p.valve_linearisation
+        # linear_model "force": the cascade on the measured chamber pressures (module docstring)
+        self.force = axis == "linear" and p.linear_model == "force"
+        self.uses_pressures = self.force
+        self.A_c1, self.A_c2 = p.A_c1, p.A_c2
+        self.F_0 = (p.A_c1 - p.A_c2) * p.p_a  # ambient pressure on the rod (errata Eq. 1), N
+        self.M_k = 1e-3 * p.M  # N per mm/s²
+        self.inv_M_k = 1.0 / self.M_k
+        self.A_f, self.c_v_k = p.A_f, 1e-3 * p.c_v  # N, N per mm/s
+        self.inv_vs = 1.0 / p.v_s
+        self.k_F = p.force_bandwidth
+        self.inv_bF = 1.0 / p.b_F
+        # chamber stiffness (Eq. 3/4 volume terms): Ḟ_p ∋ −n (A1² p1/V1 + A2² p2/V2) ẋ
+        self.nA1s, self.nA2s = p.n_poly * p.A_c1**2, p.n_poly * p.A_c2**2
+        self.V1_0 = p.V_1d + p.A_c1 * 0.5 * p.L  # m³ at x = 0
+        self.V2_0 = p.V_2d + p.A_c2 * 0.5 * p.L
+        self.p_c1 = self.p_c2 = _NAN  # chamber pressures, Pa abs (set by the controller)
+        self.F_p = _NAN  # measured pressure force, N
+        self.a_in = 0.0  # (F_p − F_f(ẋ̂))/M over the last period, mm/s²
+        self.F_d_prev = _NAN
+        self.ffw = axis == "linear" and p.linear_model == "position" and p.friction_feedforward
+        self.b_F = p.b_F
+        self.ff_pipe = [0.0] * (params.transport_delay_samples + 1)
+        self.u_ff = 0.0  # friction feed-forward of the last update, V
         lim = params.limits
         self.u_n = lim.u_neutral
         self.lo = lim.u_min - lim.u_neutral  # valve deviation limits, V
@@ -191,6 +261,8 @@ class EsoSmcPlus:
     # -- what the next algorithm starts from --------------------------------
     @property
     def hint(self) -> tuple[float, float, float]:
+        if self.force:  # ẍ = z3 + a_in
+            return self.z1, self.z2, self.z3 + self.a_in
         if not self.angle:
             return self.z1, self.z2, self.z3 + self.b0 * self.v_in
         if self.angle_inputs:  # angle domain: (θ, ω, ω̇)
@@ -217,6 +289,17 @@ class EsoSmcPlus:
         h0 = hint[0] if math.isfinite(hint[0]) else _NAN
         h1 = hint[1] if math.isfinite(hint[1]) else 0.0
         h2 = hint[2] if math.isfinite(hint[2]) else 0.0
+        if self.force:
+            self.z1 = z1 = h0 if math.isfinite(h0) else y
+            self.z2 = z2 = h1
+            F_p = self._pressure_force()
+            self.F_p = F_p = F_p if math.isfinite(F_p) else 0.0
+            self.a_in = (F_p - self._friction(z2)) * self.inv_M_k
+            self.z3 = h2 - self.a_in  # cold start: at rest (ẍ = 0), the offsets go into f
+            e, ed = r - z1, r_dot - z2
+            self.integral = 0.0 if u_prev is None else -(ed + self.c1 * e) / self.c2
+            self.F_d_prev = _NAN
+            return self._out(self._law_force(r, r_dot, r_ddot, F_p, False))
         if not self.angle:
             self.z1 = z1 = h0 if math.isfinite(h0) else y
             self.z2 = z2 = h1
@@ -259,7 +342,13 @@ class EsoSmcPlus:
         self.v_in = v_in
         if self.angle:
             return self._update_angle(r, r_dot, r_ddot, v_in)
+        if self.force:
+            return self._update_force(y, r, r_dot, r_ddot, v_in)
         T = self.T
+        if self.ffw:  # the ESO models the law's part only; the FF acts on the force
+            ffp = self.ff_pipe
+            v_in -= ffp[0]
+            del ffp[0]
         # 3-state ESO (Eq. 18, exact ZOH current observer, pneu_control.eso)
         z2, z3 = self.z2, self.z3
         acc = z3 + self.b0 * v_in
@@ -281,6 +370,14 @@ class EsoSmcPlus:
         d = self.delta
         sat = 1.0 if s > d else (-1.0 if s < -d else self.k * s)  # Eq. 29
         v = (self.eps * sat + r_ddot + c1 * ed + c2 * e - z3) / self.b0  # Eq. 30 (fixed)
+        if self.ffw:
+            # friction feed-forward through the pressure rate: u_ff = dF_f(ṙ)/dt / b_F (Eq. 2)
+            F_r = self._friction(r_dot)
+            u_ff = 0.0 if self.F_d_prev != self.F_d_prev else (F_r - self.F_d_prev) / (T * self.b_F)
+            self.F_d_prev = F_r
+            self.ff_pipe.append(u_ff)
+            self.u_ff = u_ff
+            v += u_ff
         # conditional integration (as ESO-SMC): valve saturation or |s| > Δ
         if e > 0.0:
             if not (v > self.v_hi or s > d):
@@ -298,6 +395,70 @@ class EsoSmcPlus:
             z2 += T * acc
         tau = self.tau
         return z1, z2, r + tau * r_dot + 0.5 * tau * tau * r_ddot, r_dot + tau * r_ddot
+
+    def _pressure_force(self) -> float:
+        """F_p = A_c1 p_c1 − A_c2 p_c2 − A_r p_a (errata Eq. 1), N."""
+        return self.A_c1 * self.p_c1 - self.A_c2 * self.p_c2 - self.F_0
+
+    def _friction(self, v: float) -> float:
+        """F_f(v) of Eq. 2, Coulomb sign smoothed (tanh over v_s), N; v in mm/s."""
+        return self.A_f * math.tanh(v * self.inv_vs) + self.c_v_k * v
+
+    def _update_force(self, y, r, r_dot, r_ddot, v_in):
+        T = self.T
+        # 3-state ESO on the laser with the measured acceleration as known input:
+        # ẍ = f + (F_p − F_f(ẋ))/M  (f: sensor offsets, static friction, model error)
+        z2, z3 = self.z2, self.z3
+        acc = z3 + self.a_in
+        z1p = self.z1 + T * z2 + self.T2h * acc
+        z2p = z2 + T * acc
+        ey = y - z1p
+        z1 = z1p + self.l1 * ey
+        z2 = z2p + self.l2 * ey
+        z3 = z3 + self.l3 * ey
+        self.z1, self.z2, self.z3 = z1, z2, z3
+        F_p = self._pressure_force()
+        if not (-1e300 < F_p < 1e300):  # no pressures this sample: hold the last one
+            F_p = self.F_p
+        self.F_p = F_p
+        self.a_in = (F_p - self._friction(z2)) * self.inv_M_k
+        return self._out(self._law_force(r, r_dot, r_ddot, F_p, True))
+
+    def _law_force(self, r, r_dot, r_ddot, F_p, integrate):
+        T, z1, z2, z3 = self.T, self.z1, self.z2, self.z3
+        # outer loop: Eq. 26–30 on ẍ, asking for an acceleration a_d
+        e = r - z1
+        ed = r_dot - z2
+        integral = self.integral + T * e
+        c1, c2 = self.c1, self.c2
+        s = ed + c1 * e + c2 * integral
+        self.s = s
+        d = self.delta
+        sat = 1.0 if s > d else (-1.0 if s < -d else self.k * s)
+        a_d = self.eps * sat + r_ddot + c1 * ed + c2 * e - z3
+        # desired piston force (Eq. 1 with the Eq. 2 friction of the reference speed)
+        F_r = self.M_k * r_ddot + self._friction(r_dot)  # the reference's own force
+        F_d = F_r + self.M_k * (a_d - r_ddot)
+        # feed-forward of Ḟ_d: the reference part only (the feedback part carries laser noise)
+        F_rp = self.F_d_prev
+        self.F_d_prev = F_r
+        F_d_dot = 0.0 if F_rp != F_rp else (F_r - F_rp) / T
+        # inner loop: Ḟ_p = b_F u − n (A1² p1/V1 + A2² p2/V2) ẋ  (Eq. 3/4, volume terms)
+        x_m = 1e-3 * z1
+        K_s = self.nA1s * self.p_c1 / (self.V1_0 + self.A_c1 * x_m) + self.nA2s * self.p_c2 / (
+            self.V2_0 - self.A_c2 * x_m
+        )
+        if not (-1e300 < K_s < 1e300):  # a NaN pressure this sample: no stiffness term
+            K_s = 0.0
+        v = (F_d_dot + self.k_F * (F_d - F_p) + K_s * 1e-3 * z2) * self.inv_bF
+        if not integrate:
+            return v
+        if e > 0.0:  # conditional integration (as ESO-SMC)
+            if not (v > self.v_hi or s > d):
+                self.integral = integral
+        elif not (v < self.v_lo or s < -d):
+            self.integral = integral
+        return v
 
     def _update_angle(self, r, r_dot, r_ddot, v_in):
         T, T2h, T3s = self.T, self.T2h, self.T3s
