@@ -107,3 +107,16 @@ def test_switching_to_and_from_eso_smc_plus_is_bumpless(axis):
         w = np.convolve(err[1400:], np.ones(75) / 75.0, mode="valid") * 60.0 / (2.0 * np.pi)
         assert np.max(np.abs(w)) < 8.0  # leaving ESO-SMC+ for ESO-SMC: ≈ 6 rpm, 0.3 s
     assert ctrl.algorithm == "eso_smc_plus"
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known, open: with robustness.scaled_plant (J_m x0.7, supply x1.3) the angle "
+    "observer limit-cycles at 800 rpm (per-rev e_max 72 rpm); _corner above scales M only",
+)
+def test_angle_observer_at_the_light_inertia_high_supply_corner():
+    from pneu_control.robustness import scaled_plant
+
+    plant = scaled_plant(load_plant(None), mass=0.7, supply=1.3)
+    rot = _metrics("rotary", "eso_smc_plus", SPEED, 4.0, plant=plant)
+    assert rot.e_max < 1.5
