@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import sys
@@ -64,8 +65,11 @@ def machine() -> dict[str, Any]:
 
 
 def closed_loop_rtf(duration_s: float = 20.0, *, logged: bool = False) -> float:
-    """Both axes under ESO-SMC with the twin, in-process (optionally logging a bag)."""
+    """Both axes under ESO-SMC with the twin, in-process lockstep (safety supervisor on),
+    timed over the closed loop itself; ``logged`` adds writing the MCAP bag (closed included)."""
     from . import session
+    from .bag_log import open_run_bag
+    from .runner import run
 
     spec = session.build_spec(
         axes=("linear", "rotary"),
@@ -80,12 +84,18 @@ def closed_loop_rtf(duration_s: float = 20.0, *, logged: bool = False) -> float:
         duration_s=duration_s,
         name="bench",
     )
-    session.execute(spec, tempfile.mkdtemp(prefix="pneu-bench-warm-"), bag=logged)  # JIT warm-up
+    echo = session.config_echo(spec)
     with tempfile.TemporaryDirectory(prefix="pneu-bench-") as tmp:
-        t0 = time.perf_counter()
-        session.execute(spec, tmp, bag=logged)
-        wall = time.perf_counter() - t0
-    return duration_s / wall
+        best = math.inf
+        for i in range(2):  # the first pass also warms the JIT cache and the allocator
+            t0 = time.perf_counter()
+            if logged:
+                with open_run_bag(Path(tmp) / f"run{i}.mcap", spec, echo) as bag:
+                    run(spec, bag=bag)
+            else:
+                run(spec)
+            best = min(best, time.perf_counter() - t0)
+    return duration_s / best
 
 
 def _groups(quick: bool) -> dict[str, Callable[[], dict[str, Any]]]:

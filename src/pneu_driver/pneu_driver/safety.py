@@ -360,6 +360,9 @@ def _fmt(v: Any) -> str:
     return f"{v:.6g}" if isinstance(v, float) else str(v)
 
 
+_SANITY_GROUP = {axis: f"sanity:{axis}" for axis in AXES}
+
+
 class SafetySupervisor:
     """Per-axis safety state machine (see the module docstring for the rules).
 
@@ -405,7 +408,9 @@ class SafetySupervisor:
         self._enc_prev: tuple[int, int, float | None] | None = (
             None  # (counts, stamp, counts/period)
         )
-        self._frozen: dict[str, tuple[float, int]] = {}  # sensor -> (value, since_ns)
+        # per analog channel (_ANALOG order): last value and since when it holds it
+        self._frozen_v: list[float] = [math.nan] * len(_ANALOG)  # NaN: never equal, starts fresh
+        self._frozen_t: list[int] = [0] * len(_ANALOG)
         self._x = math.nan
         self._v = 0.0
         self._have_sample = False
@@ -478,16 +483,18 @@ class SafetySupervisor:
                         lo=lo,
                         hi=hi,
                     )
-        for sensor, p_max in self._p_max.items():
-            pv = getattr(sample, sensor)
-            if pv > p_max:
-                flag(
-                    sensor,
-                    "over_pressure",
-                    f"{sensor} = {pv:.6g} Pa above supply + margin = {p_max:.6g} Pa",
-                    pressure_pa=pv,
-                    limit_pa=p_max,
-                )
+        pm = self._p_max
+        if s.p_c1 > pm["p_c1"] or s.p_c2 > pm["p_c2"] or s.p_m1 > pm["p_m1"]:  # fast screen
+            for sensor, p_max in pm.items():
+                pv = getattr(sample, sensor)
+                if pv > p_max:
+                    flag(
+                        sensor,
+                        "over_pressure",
+                        f"{sensor} = {pv:.6g} Pa above supply + margin = {p_max:.6g} Pa",
+                        pressure_pa=pv,
+                        limit_pa=p_max,
+                    )
         x = sample.x
         if abs(x) > self._x_abs_max:
             flag(
@@ -498,17 +505,18 @@ class SafetySupervisor:
             )
         # frozen analog values: the raw volts when given, else the SI value
         values = raw_volts if raw_volts is not None else (sample.p_c1, sample.p_c2, sample.p_m1, x)
-        for sensor, v in zip(_ANALOG, values):
-            last = self._frozen.get(sensor)
-            if last is None or v != last[0]:
-                self._frozen[sensor] = (v, now)
-            elif now - last[1] > self._stuck_ns:
+        fv, ft, stuck_ns = self._frozen_v, self._frozen_t, self._stuck_ns
+        for i, v in enumerate(values):
+            if v != fv[i]:
+                fv[i], ft[i] = v, now
+            elif now - ft[i] > stuck_ns:
+                sensor = _ANALOG[i]
                 flag(
                     sensor,
                     "stuck",
-                    f"{sensor} frozen at {v:.6g} for {(now - last[1]) * 1e-6:.4g} ms (> {p.stuck_ms:g} ms)",
+                    f"{sensor} frozen at {v:.6g} for {(now - ft[i]) * 1e-6:.4g} ms (> {p.stuck_ms:g} ms)",
                     value=v,
-                    frozen_ms=(now - last[1]) * 1e-6,
+                    frozen_ms=(now - ft[i]) * 1e-6,
                 )
         # piston velocity over the window (for the braking distance)
         if math.isfinite(x):
@@ -603,15 +611,16 @@ class SafetySupervisor:
         """
         if axis not in self._last_cmd:
             raise ValueError(f"axis: {axis!r} refused; allowed: one of {', '.join(AXES)}")
-        group = f"sanity:{axis}"
-        if not (math.isfinite(u) and U_MIN_V <= u <= U_MAX_V):
+        group = _SANITY_GROUP[axis]
+        if not (U_MIN_V <= u <= U_MAX_V):  # NaN fails every comparison; ±inf is out of range
             self.counters["refused_commands"] += 1
             msg = f"{axis} command {u!r} V refused (allowed [{U_MIN_V:g}, {U_MAX_V:g}] V, finite)"
             self._update_group(
                 group, {(axis, "output_sanity"): (msg, {"command_v": u})}, self._now_ns
             )
             return
-        self._update_group(group, {}, self._now_ns)
+        if self._groups.get(group):  # a refused command was pending: clear it
+            self._update_group(group, {}, self._now_ns)
         last = self._last_cmd[axis]
         if last is not None and stamp_ns < last[1]:
             self.counters["stale_commands"] += 1
@@ -759,6 +768,8 @@ class SafetySupervisor:
     # ----------------------------------------------------------------- reports
     def events(self) -> list[SafetyEvent]:
         """Drain the transitions queued since the last call (oldest first)."""
+        if not self._events:
+            return []
         out = list(self._events)
         self._events.clear()
         return out
