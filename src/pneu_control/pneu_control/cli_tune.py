@@ -33,25 +33,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def make_score(axis: str, plant, controllers_file) -> Any:
-    """Tuning cost: the worst RMSE of the tuning experiment over the nominal twin and
-    the ±30 % mass/supply corners (robustness is part of the method, not an afterthought)."""
-    exp = tuning.TUNING_EXPERIMENTS[axis]
+    """Tuning cost: the worst RMSE over the axis's tuning experiments, on the nominal twin
+    and the ±30 % mass/supply corners (robustness is part of the method)."""
     plants = [plant] + [scaled_plant(plant, mass=m, supply=s) for m, s in ROBUSTNESS_VARIANTS]
-    base = session.build_spec(
-        axes=(axis,),
-        reference=dict(exp.reference),
-        duration_s=exp.duration_s,
-        controllers_file=controllers_file,
-        plant=plant,
-        name="tune",
-    )
+    cases = []
+    for exp in tuning.TUNING_EXPERIMENTS[axis]:
+        base = session.build_spec(
+            axes=(axis,),
+            reference=dict(exp.reference),
+            duration_s=exp.duration_s,
+            controllers_file=controllers_file,
+            plant=plant,
+            name="tune",
+        )
+        cases.extend((exp, replace(base, plant=p)) for p in plants)
 
     def score(overrides: dict[str, Any]) -> float:
-        params = load_controller_params(axis, controllers_file, {**exp.reference, **overrides})
         worst = 0.0
-        for p in plants:
-            spec = replace(base, controllers={axis: params}, plant=p)
-            m = run_spec(spec).metrics.get(axis)
+        for exp, spec in cases:
+            params = load_controller_params(axis, controllers_file, {**exp.reference, **overrides})
+            m = run_spec(replace(spec, controllers={axis: params})).metrics.get(axis)
             if m is None or not math.isfinite(m.rmse):
                 return math.inf
             worst = max(worst, m.rmse)
