@@ -25,7 +25,7 @@ ARGS = (
     (
         "controller",
         "",
-        "algorithm of every active controller (pid, ladrc, eso_smc); '' = controllers.yaml",
+        "algorithm of every active controller (pid, ladrc, eso_smc, eso_smc_plus); '' = controllers.yaml",
     ),
     (
         "reference",
@@ -38,7 +38,7 @@ ARGS = (
     ("out", "out/rig", "directory of the bag (run.mcap)"),
     ("rig_file", "", "rig YAML ('' = installed config/rig.yaml)"),
 )
-CHOICES = {"axes": ["linear", "rotary", "both"], "controller": ["", "pid", "ladrc", "eso_smc"]}
+CHOICES = {"axes": ["linear", "rotary", "both"], "controller": ["", "pid", "ladrc", "eso_smc", "eso_smc_plus"]}
 
 
 def reference_overrides(text: str) -> dict:

@@ -26,7 +26,7 @@ ARGS = (
     (
         "controller",
         "",
-        "algorithm of every active controller (pid, ladrc, eso_smc); '' = controllers.yaml",
+        "algorithm of every active controller (pid, ladrc, eso_smc, eso_smc_plus); '' = controllers.yaml",
     ),
     (
         "reference",
@@ -119,7 +119,7 @@ def _setup(context):
 CHOICES = {
     "axes": ["linear", "rotary", "both"],
     "mode": ["lockstep", "realtime"],
-    "controller": ["", "pid", "ladrc", "eso_smc"],
+    "controller": ["", "pid", "ladrc", "eso_smc", "eso_smc_plus"],
     "safety": ["true", "false"],
 }
 
