@@ -38,7 +38,10 @@ ARGS = (
     ("out", "out/rig", "directory of the bag (run.mcap)"),
     ("rig_file", "", "rig YAML ('' = installed config/rig.yaml)"),
 )
-CHOICES = {"axes": ["linear", "rotary", "both"], "controller": ["", "pid", "ladrc", "eso_smc", "eso_smc_plus"]}
+CHOICES = {
+    "axes": ["linear", "rotary", "both"],
+    "controller": ["", "pid", "ladrc", "eso_smc", "eso_smc_plus"],
+}
 
 
 def reference_overrides(text: str) -> dict:
