@@ -12,6 +12,7 @@ applied after (post-set), and takes effect at the next sample, bumplessly.
 
 from __future__ import annotations
 
+import signal
 import sys
 
 import rclpy
@@ -191,13 +192,19 @@ def _main(axis: str, args=None) -> int:
         print(f"{axis}_controller: error: {err}", file=sys.stderr)
         code = 1
     finally:
-        if node is not None:
-            try:
-                node.publish_neutral()
-            except Exception:  # context already shut down by the signal: the watchdog acts
-                pass
-            node.destroy_node()
-        rclpy.try_shutdown()
+        # Ctrl-C reaches a launched node twice (the terminal's process group, then
+        # launch's forward): the second SIGINT must not cut the cleanup short.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            if node is not None:
+                try:
+                    node.publish_neutral()
+                except Exception:  # context already shut down by the signal: the watchdog acts
+                    pass
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
     return code
 
 

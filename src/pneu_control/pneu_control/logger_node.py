@@ -12,6 +12,7 @@ file. Output: ``<out>/<bag_name>``.
 from __future__ import annotations
 
 import dataclasses
+import signal
 import sys
 from pathlib import Path
 
@@ -179,11 +180,17 @@ def main(args=None) -> int:
         print(f"logger: error: {err}", file=sys.stderr)
         code = 1
     finally:
-        if node is not None:
-            node.core.close()  # metadata, summary, footer: the bag is complete
-            print(f"logger: wrote {node.path}", file=sys.stderr)
-            node.destroy_node()
-        rclpy.try_shutdown()
+        # Ctrl-C reaches a launched node twice (the terminal's process group, then
+        # launch's forward): the second SIGINT must not cut the cleanup short.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            if node is not None:
+                node.core.close()  # metadata, summary, footer: the bag is complete
+                print(f"logger: wrote {node.path}", file=sys.stderr)
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
     return code
 
 

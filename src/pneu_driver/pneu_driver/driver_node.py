@@ -14,6 +14,7 @@ devices visible, exit status 1.
 from __future__ import annotations
 
 import collections
+import signal
 import sys
 import threading
 
@@ -254,12 +255,18 @@ def main(args=None) -> int:
         print(f"driver_node: error: {err}", file=sys.stderr)
         code = 1
     finally:
-        if node is not None:
-            node.loop.stop()  # the loop's finally writes 5 V and closes the tasks
-            if node.thread is not None:
-                node.thread.join(timeout=2.0)
-            node.destroy_node()
-        rclpy.try_shutdown()
+        # Ctrl-C reaches a launched node twice (the terminal's process group, then
+        # launch's forward): the second SIGINT must not cut the cleanup short.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            if node is not None:
+                node.loop.stop()  # the loop's finally writes 5 V and closes the tasks
+                if node.thread is not None:
+                    node.thread.join(timeout=2.0)
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
     return code
 
 

@@ -11,6 +11,7 @@ simulated time has been published.
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
 
@@ -345,10 +346,16 @@ def main(args=None) -> int:
         print(f"sim_node: error: {err}", file=sys.stderr)
         code = 1
     finally:
-        if node is not None:
-            node.core.safe_outputs()  # a real rig would now be at 5 V on both valves
-            node.destroy_node()
-        rclpy.try_shutdown()
+        # Ctrl-C reaches a launched node twice (the terminal's process group, then
+        # launch's forward): the second SIGINT must not cut the cleanup short.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            if node is not None:
+                node.core.safe_outputs()  # a real rig would now be at 5 V on both valves
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
     return code
 
 
