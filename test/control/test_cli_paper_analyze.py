@@ -11,17 +11,22 @@ from pneu_control.cli import main
 @pytest.fixture(scope="module")
 def paper_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("paper")
-    assert main(["paper", "--out", str(out), "--only", "smooth_step_eq38", "--no-plots"]) == 0
+    argv = ["paper", "--out", str(out), "--only", "smooth_step_eq38", "--no-plots", "--seeds", "2"]
+    assert main(argv) == 0
     return out
 
 
 def test_paper_table_fields(paper_dir):
     doc = json.loads((paper_dir / "paper_table.json").read_text())
     rows = doc["experiments"]
-    assert {r["gains"] for r in rows} == {"paper", "retuned"}
+    assert {r["gains"] for r in rows} == {"paper", "retuned", "design"}
+    assert {r["controller"] for r in rows} == {"eso_smc", "eso_smc_plus"}
     for r in rows:
+        assert r["seeds"] == 2 and r["e_max_worst"] >= r["e_max_mean"]
+        assert r["e_max_worst"] >= r["e_max"] and r["rmse_worst"] >= r["rmse"]  # seed 0 included
         assert r["id"] == "smooth_step_eq38" and r["axis"] == "linear" and r["unit"] == "mm"
-        assert r["paper_e_max"] == 0.04 and r["paper_rmse"] is None
+        paper_e_max = 0.04 if r["controller"] == "eso_smc" else None
+        assert r["paper_e_max"] == paper_e_max and r["paper_rmse"] is None
         assert r["window_s"][0] == 5.0
     assert "| smooth_step_eq38 | eso_smc | paper |" in (paper_dir / "paper_table.md").read_text()
 

@@ -21,7 +21,14 @@ HELP = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="DIR")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the runs in the table (and bags)")
+    p.add_argument(
+        "--seeds",
+        type=int,
+        default=5,
+        metavar="N",
+        help="also run seeds seed+1..seed+N-1 (no bags) for mean/worst columns (1: off)",
+    )
     p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
     p.add_argument(
         "--config-dir",
@@ -82,18 +89,41 @@ def run(args: argparse.Namespace) -> int:
         results[(exp.id, controller, gains)] = (result, m)
         return result, m
 
+    def seed_runner(exp: Experiment, controller: str, gains: str, seed: int):
+        from .runner import run as run_spec
+
+        spec = session.build_spec(
+            axes=(exp.axis,),
+            controller=controller,
+            reference=dict(exp.reference),
+            duration_s=exp.duration_s,
+            seed=seed,
+            controllers_file=cfg / paper.GAIN_SETS[gains],
+            plant=plant,
+        )
+        return run_spec(_with_window(spec, exp)).metrics[exp.axis]
+
+    if args.seeds < 1:
+        raise ValueError(f"--seeds: {args.seeds} refused; allowed: an integer >= 1")
     t0 = time.perf_counter()
     print(f"pneu paper: experiments of the paper on the twin (seed {args.seed})")
     experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
-    rows = paper.run_paper(out, seed=args.seed, runner=runner, experiments=experiments)
-    paper.write_table(rows, out, extra={"seed": args.seed})
+    rows = paper.run_paper(
+        out,
+        seed=args.seed,
+        runner=runner,
+        experiments=experiments,
+        seed_runner=seed_runner,
+        seeds=args.seeds,
+    )
+    paper.write_table(rows, out, extra={"seed": args.seed, "seeds": args.seeds})
     if not args.no_plots:
         for exp in experiments:
-            for gains in paper.GAIN_SETS:
+            for gains in paper.PAPER_GAIN_SETS:
                 keys = [
                     (exp.id, c, g)
                     for c, g in paper.runs_for(exp)
-                    if (g == gains) or (gains == "retuned" and c not in exp.controllers)
+                    if (g == gains) or (gains == "retuned" and g == "design")
                 ]
                 series = [
                     _series(results[k][0], exp, f"{k[1]} ({k[2]} gains)", results[k][1])
