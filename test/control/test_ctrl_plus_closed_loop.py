@@ -1,10 +1,9 @@
 """ESO-SMC+ on the physics twin against the re-tuned ESO-SMC; robustness; bumpless switching.
 
 Short runs (a few simulated seconds). ESO-SMC runs with the re-tuned set
-(config/controllers_retuned.yaml); ESO-SMC+ with its defaults in
-config/controllers.yaml (hand-picked from sweeps at the paper's operating
-points: the equal-effort ``pneu tune`` grid does not find them, see the
-module docstring of pneu_control.algorithms.eso_smc_plus).
+(config/controllers_retuned.yaml); ESO-SMC+ with its design-rule gains in
+config/controllers.yaml (b0 = 1.5 x identified; see the module docstring of
+pneu_control.algorithms.eso_smc_plus).
 """
 
 import numpy as np

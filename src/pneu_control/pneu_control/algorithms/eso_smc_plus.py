@@ -103,11 +103,20 @@ pressure acceleration as a second output and the law one order up
 (s = ë + 2λė + λ²e on x‴ = f + b3 u): mm-level errors on the twin (valve dead
 band, stick-slip, b3 varies 3× with the opening); correcting the 3-state
 ESO's f̂ from the pressure acceleration: an undamped acceleration loop (the
-model's b0·u is an acceleration, the plant's is a force rate). Rotary: the
-angle observer limit-cycles at 1100 rpm (≈ 20 Hz, ±30 rpm; not the 73 Hz
-vane ripple) for every (λ, ω0, b0, delay compensation) tried; an LMS
-canceller of the n_vanes·θ ripple in the angle and a smaller angle-error
-weight did not remove it. Open.
+model's b0·u is an acceleration, the plant's is a force rate).
+
+Gains: a design rule, not a grid search. b0 = 1.5 × the b0 that ``pneu tune``
+identifies from the twin's step response (2403 mm/s²/V, 2.31e6 rpm/s²/V at
+1100 rpm), on both axes: the plant's input gain grows with the operating
+point (the Festo flow curve is convex; the rotary b is 1.27e6 at 600 and
+2.96e6 rpm/s²/V at 1500 rpm) and with supply and lighter inertia, and an ESO
+whose b0 is below the plant's b loses its gain margin. With b0 at the
+identified value the angle observer limit-cycled at 1100 rpm (≈ 20 Hz,
+±30 rpm) and at the light-inertia/high-supply corner; with 1.5× it does not
+(600–1100 rpm × ±30 % corners, tested). ω0: the re-tuned ESO-SMC's 51.4 rad/s
+(linear); 120 rad/s for the 4-pole angle observer (below ≈ 90 rad/s it
+oscillates). λ_R 20 (linear), 10 (rotary); ε/b0 = 0.4 V and k = 1/Δ,
+Δ = 2εT, as the re-tuned ESO-SMC.
 
 Delay compensation (optional, as in ESO-SMC): the law acts on the ESO state
 predicted over the transport delay with the commands already sent.
