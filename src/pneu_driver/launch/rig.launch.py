@@ -32,6 +32,12 @@ ARGS = (
         "",
         "reference of every active axis, KIND[:key=value,...] in mm / rpm; '' = controllers.yaml",
     ),
+    (
+        "gains",
+        "paper",
+        "controller gain set: paper (controllers.yaml) or retuned (controllers_retuned.yaml); "
+        "default: the paper's gains, tuned on the authors' rig",
+    ),
     ("linear_reference", "", "reference of the linear axis only (wins over reference)"),
     ("rotary_reference", "", "reference of the rotary axis only (wins over reference)"),
     ("axes", "both", "axes with a controller (the driver holds the others at 5 V)"),
@@ -41,7 +47,11 @@ ARGS = (
 CHOICES = {
     "axes": ["linear", "rotary", "both"],
     "controller": ["", "pid", "ladrc", "eso_smc", "eso_smc_plus"],
+    "gains": ["paper", "retuned"],
 }
+
+
+GAIN_FILES = {"paper": "controllers.yaml", "retuned": "controllers_retuned.yaml"}
 
 
 def reference_overrides(text: str) -> dict:
@@ -93,7 +103,7 @@ def _setup(context):
                 executable=f"{axis}_controller",
                 name=f"{axis}_controller",
                 output="screen",
-                parameters=[os.path.join(config, "controllers.yaml"), over],
+                parameters=[os.path.join(config, GAIN_FILES[arg["gains"]]), over],
             )
         )
     nodes.append(

@@ -33,6 +33,12 @@ ARGS = (
         "",
         "reference of every active axis, KIND[:key=value,...] in mm / rpm; '' = controllers.yaml",
     ),
+    (
+        "gains",
+        "retuned",
+        "controller gain set: paper (controllers.yaml) or retuned (controllers_retuned.yaml); "
+        "default: the twin's re-tuned set (the paper's linear ESO-SMC and rotary gains limit-cycle on the twin)",
+    ),
     ("linear_reference", "", "reference of the linear axis only (wins over reference)"),
     ("rotary_reference", "", "reference of the rotary axis only (wins over reference)"),
     ("axes", "both", "active axes (the others hold 5 V)"),
@@ -43,6 +49,9 @@ ARGS = (
     ("safety", "true", "SafetySupervisor between commands and plant, as on the rig"),
     ("faults", "", "injected faults, ';'-separated NAME[:key=value,...] (as pneu run --fault)"),
 )
+
+
+GAIN_FILES = {"paper": "controllers.yaml", "retuned": "controllers_retuned.yaml"}
 
 
 def reference_overrides(text: str) -> dict:
@@ -101,7 +110,7 @@ def _setup(context):
                 executable=f"{axis}_controller",
                 name=f"{axis}_controller",
                 output="screen",
-                parameters=[os.path.join(config, "controllers.yaml"), over],
+                parameters=[os.path.join(config, GAIN_FILES[arg["gains"]]), over],
             )
         )
     nodes.append(
@@ -120,6 +129,7 @@ CHOICES = {
     "axes": ["linear", "rotary", "both"],
     "mode": ["lockstep", "realtime"],
     "controller": ["", "pid", "ladrc", "eso_smc", "eso_smc_plus"],
+    "gains": ["paper", "retuned"],
     "safety": ["true", "false"],
 }
 
