@@ -222,7 +222,7 @@ def bench_shell_us_per_sample(n: int = 5000, axis: str = "linear") -> float:
     sample rebuilt, ``AxisController.update`` (the configured algorithm;
     ESO-SMC in config/controllers.yaml) and the command and state messages
     filled. rclpy's own cost (take, deserialise, publish, serialise) is not
-    included: that needs ROS (see ``src/pneu_control/ROS.md``).
+    included: that needs ROS (see the README's ROS 2 section).
     """
     from pneu_msgs_py.convert import typestore_messages
     from pneu_sim.lockstep import fill_sample_messages
