@@ -72,3 +72,13 @@ def test_bad_window_kind_refused():
         WindowSpec(kind="sine")
     with pytest.raises(ValueError, match="axis"):
         compute_metrics("vertical", grid(1), np.zeros(1000), np.zeros(1000), WindowSpec())
+
+
+def test_controller_state_fields_are_the_contract_fields():
+    import dataclasses
+
+    from pneu_control.axis import STATE_FIELDS, ControllerState
+    from pneu_msgs_py.topics import DEFAULT_STATE_FIELDS
+
+    names = tuple(f.name for f in dataclasses.fields(ControllerState) if f.name != "algorithm")
+    assert names == STATE_FIELDS == DEFAULT_STATE_FIELDS

@@ -45,6 +45,7 @@ from dataclasses import dataclass
 
 from pneu_msgs_py.params import ParamError, validate
 from pneu_msgs_py.samples import SensorSample
+from pneu_msgs_py.topics import DEFAULT_STATE_FIELDS
 
 from .algorithms import make_algorithm
 from .ctrl_params import AxisControllerParams
@@ -82,19 +83,9 @@ class ControllerState:
     algorithm: str = ""
 
 
-STATE_FIELDS: tuple[str, ...] = (
-    "t",
-    "reference",
-    "reference_dot",
-    "measured",
-    "error",
-    "z1",
-    "z2",
-    "z3",
-    "s",
-    "u_raw",
-    "u_sat",
-)
+# the float fields of ControllerState, in the order of /pneu/<axis>/controller_state (one
+# definition: the message contract's)
+STATE_FIELDS: tuple[str, ...] = DEFAULT_STATE_FIELDS
 
 
 class AxisController:
