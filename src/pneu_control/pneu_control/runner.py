@@ -236,8 +236,7 @@ def run(
                 sup.check_sample(s, volts)
                 u_hold_l, u_hold_r = sup.outputs(stamp)  # u_{k-1} after the rules, tick k
             rec_samples.append(s)
-            if bag is not None:
-                bag.write_sample(s)
+            answers = []  # (axis, u, state values, algorithm) for the bag, in axis order
             u_new = [NEUTRAL_V, NEUTRAL_V]  # an inactive axis holds the neutral command
             for i, axis, ctrl, rec_st, rec_u_ in active:
                 u = None
@@ -256,11 +255,12 @@ def run(
                     rec_st.append(values)
                     rec_u_.append(u)
                     if bag is not None:
-                        bag.write_command(axis, stamp, u)
-                        bag.write_controller_state(axis, stamp, values, ctrl.algorithm)
+                        answers.append((axis, u, values, ctrl.algorithm))
                     if sup is not None:
                         sup.command(axis, u, stamp)
                 u_new[i] = u
+            if bag is not None:
+                bag.write_cycle(s, answers)
             if sup is not None:
                 events = sup.events()
                 if events:
