@@ -19,9 +19,9 @@ from pneu_control.logger_core import (
     run_config_from_params,
     stamp_from_cdr,
 )
-from pneu_control.ros_params import values_to_overrides
 from pneu_control.runner import run
 from pneu_msgs_py.convert import typestore_messages
+from pneu_msgs_py.ros_params import values_to_overrides
 from pneu_msgs_py.topics import TOPIC_BY_NAME
 from rosbags.highlevel import AnyReader
 

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from pneu_control.ros_params import (
+from pneu_msgs_py.params import ParamError, flatten, param, validate
+from pneu_msgs_py.ros_params import (
     PARAMETER_TYPE,
     allowed_text,
     coerce_value,
@@ -18,7 +19,6 @@ from pneu_control.ros_params import (
     validate_updates,
     values_to_overrides,
 )
-from pneu_msgs_py.params import ParamError, flatten, param, validate
 from rosbags.typesys import Stores, get_typestore
 
 TS = get_typestore(Stores.ROS2_JAZZY)

@@ -20,6 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pneu_msgs_py.convert import fill_diagnostic_array, fill_valve_command
 from pneu_msgs_py.params import ParamError
 from pneu_msgs_py.qos import DIAGNOSTICS, to_rclpy
+from pneu_msgs_py.ros_params import coerce_value, declarations, specs_by_name, validate_updates
 from pneu_msgs_py.topics import (
     CONTROLLER_STATE_TOPIC,
     DIAGNOSTICS_TOPIC,
@@ -42,7 +43,6 @@ from sensor_msgs.msg import FluidPressure, JointState
 
 from .axis import AxisController
 from .ctrl_params import load_controller_params
-from .ros_params import coerce_value, declarations, specs_by_name, validate_updates
 from .shell_core import SENSOR_TOPICS, ControllerShellCore
 
 

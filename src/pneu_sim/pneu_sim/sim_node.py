@@ -19,8 +19,9 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pneu_driver.safety import SafetySupervisor, load_safety_params
 from pneu_msgs_py.convert import DiagStatus, command_from_msg, fill_diagnostic_array, fill_stamp
-from pneu_msgs_py.params import ParamError, describe, from_dict, with_updates
+from pneu_msgs_py.params import ParamError, from_dict, with_updates
 from pneu_msgs_py.qos import COMMAND_SUB_REALTIME, DIAGNOSTICS, to_rclpy
+from pneu_msgs_py.ros_params import declarations
 from pneu_msgs_py.topics import (
     CLOCK_TOPIC,
     DIAGNOSTICS_TOPIC,
@@ -60,18 +61,9 @@ SENSOR_TOPICS = (*PRESSURE_TOPICS, JOINT_STATE_TOPIC["linear"], JOINT_STATE_TOPI
 
 def declare_from_dataclass(node: Node, params) -> dict:
     """Declare every field of ``params`` (descriptor: description, range, read-only); values back."""
-    for spec in describe(params):
-        d = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
-        if spec.lo is not None and spec.hi is not None and spec.type is float:
-            d.floating_point_range = [
-                FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi), step=0.0)
-            ]
-        elif spec.lo is not None and spec.hi is not None and spec.type is int:
-            d.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi), step=0)]
-        if spec.choices:
-            d.additional_constraints = "one of " + ", ".join(spec.choices)
-        node.declare_parameter(spec.name, spec.default, d)
-    return {spec.name: node.get_parameter(spec.name).value for spec in describe(params)}
+    decls = declarations(params, ParameterDescriptor, FloatingPointRange, IntegerRange)
+    node.declare_parameters("", decls)
+    return {name: node.get_parameter(name).value for name, _, _ in decls}
 
 
 class SimNode(Node):

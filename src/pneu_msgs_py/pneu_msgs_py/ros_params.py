@@ -29,7 +29,7 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from pneu_msgs_py.params import ParamError, ParamSpec, describe, flatten, with_updates
+from .params import ParamError, ParamSpec, describe, flatten, with_updates
 
 __all__ = [
     "PARAMETER_TYPE",
