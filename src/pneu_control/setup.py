@@ -25,7 +25,7 @@ setup(
         "numpy>=1.26",
         "PyYAML>=6.0",
         "matplotlib>=3.7",
-        "mcap-ros2-support>=0.5",  # pneu_control.fault_table checks bags with it
+        "mcap-ros2-support>=0.5",  # pneu_control.experiment.fault_table checks bags with it
     ],
     zip_safe=True,
     maintainer="pneu developers",
@@ -34,10 +34,10 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "pneu = pneu_control.cli:main",
-            "linear_controller = pneu_control.controller_node:main_linear",
-            "rotary_controller = pneu_control.controller_node:main_rotary",
-            "logger = pneu_control.logger_node:main",
+            "pneu = pneu_control.cli.main:main",
+            "linear_controller = pneu_control.nodes.controller_node:main_linear",
+            "rotary_controller = pneu_control.nodes.controller_node:main_rotary",
+            "logger = pneu_control.nodes.logger_node:main",
         ],
     },
 )

@@ -31,6 +31,6 @@ setup(
     description="Physics twin of the linear-rotary pneumatic actuator (Jia et al.) and its ROS 2 sim node.",
     license="Apache-2.0",
     entry_points={
-        "console_scripts": ["sim_node = pneu_sim.sim_node:main"],
+        "console_scripts": ["sim_node = pneu_sim.nodes.sim_node:main"],
     },
 )

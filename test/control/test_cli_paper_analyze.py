@@ -5,7 +5,7 @@ import json
 import struct
 
 import pytest
-from pneu_control.cli import main
+from pneu_control.cli.main import main
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +88,7 @@ def test_truncated_bag_yields_complete_chunks_with_warning(paper_dir, tmp_path, 
 
 def test_bag_missing_controller_topic(tmp_path, capsys):
     from pneu_msgs_py.bag import BagWriter
-    from pneu_msgs_py.samples import SensorSample
+    from pneu_msgs_py.contract.samples import SensorSample
 
     path = tmp_path / "sensors_only.mcap"
     with BagWriter(path) as w:

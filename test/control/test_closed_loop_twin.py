@@ -5,13 +5,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from pneu_control.metrics import WindowSpec
-from pneu_control.robustness import scaled_plant
-from pneu_control.runner import run
-from pneu_msgs_py.paths import config_file
-from pneu_sim.params import load_plant
-
-from pneu_control import session
+from pneu_control.analysis.metrics import WindowSpec
+from pneu_control.experiment import session
+from pneu_control.experiment.robustness import scaled_plant
+from pneu_control.experiment.runner import run
+from pneu_msgs_py.params.paths import config_file
+from pneu_sim.physics.params import load_plant
 
 ALGORITHMS = ("pid", "ladrc", "eso_smc")
 CORNERS = [(1.0, 1.0), (0.7, 1.0), (1.3, 1.0), (1.0, 0.7), (1.0, 1.3)]

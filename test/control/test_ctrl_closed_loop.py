@@ -10,10 +10,10 @@ import math
 
 import numpy as np
 import pytest
-from pneu_control.axis import STATE_FIELDS, AxisController, ControllerState
-from pneu_control.ctrl_params import load_controller_params
-from pneu_msgs_py.params import with_updates
-from pneu_msgs_py.samples import SensorSample
+from pneu_control.controller.axis import STATE_FIELDS, AxisController, ControllerState
+from pneu_control.controller.params import load_controller_params
+from pneu_msgs_py.contract.samples import SensorSample
+from pneu_msgs_py.params.core import with_updates
 
 T = 0.001
 RPM = 60.0 / (2.0 * math.pi)

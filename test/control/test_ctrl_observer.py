@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 from pneu_control.algorithms import make_algorithm
-from pneu_control.ctrl_params import omega_0_max, params_from_mapping
-from pneu_control.eso import LinearEso, eso_error_matrix, eso_gains
-from pneu_control.td import TrackingDifferentiator, fhan
+from pneu_control.controller.params import omega_0_max, params_from_mapping
+from pneu_control.observers.eso import LinearEso, eso_error_matrix, eso_gains
+from pneu_control.observers.td import TrackingDifferentiator, fhan
 
 T = 0.001
 

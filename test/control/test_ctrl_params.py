@@ -6,14 +6,14 @@ from pathlib import Path
 
 import pytest
 import yaml
-from pneu_control.axis import AxisController
-from pneu_control.ctrl_params import (
+from pneu_control.controller.axis import AxisController
+from pneu_control.controller.params import (
     AxisControllerParams,
     ParamError,
     load_controller_params,
 )
-from pneu_msgs_py.params import describe, with_updates
-from pneu_msgs_py.samples import SensorSample
+from pneu_msgs_py.contract.samples import SensorSample
+from pneu_msgs_py.params.core import describe, with_updates
 
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "controllers.yaml"
 

@@ -8,16 +8,15 @@ pneu_control.algorithms.eso_smc_plus).
 
 import numpy as np
 import pytest
-from pneu_control.axis import AxisController
-from pneu_control.ctrl_params import load_controller_params
-from pneu_control.runner import run
-from pneu_msgs_py.params import with_updates
-from pneu_msgs_py.paths import config_file
-from pneu_msgs_py.samples import NEUTRAL_V
-from pneu_sim.params import load_plant
-from pneu_sim.plant import Plant
-
-from pneu_control import session
+from pneu_control.controller.axis import AxisController
+from pneu_control.controller.params import load_controller_params
+from pneu_control.experiment import session
+from pneu_control.experiment.runner import run
+from pneu_msgs_py.contract.samples import NEUTRAL_V
+from pneu_msgs_py.params.core import with_updates
+from pneu_msgs_py.params.paths import config_file
+from pneu_sim.physics.params import load_plant
+from pneu_sim.physics.plant import Plant
 
 RETUNED = config_file("controllers_retuned.yaml")
 DEFAULTS = config_file("controllers.yaml")
@@ -116,8 +115,8 @@ def test_angle_observer_no_limit_cycle_across_speeds_and_corners(speed, mass, su
     ±30 % inertia/supply corners (robustness.scaled_plant scales J_m and the supplies)."""
     from dataclasses import replace
 
-    from pneu_control.metrics import WindowSpec
-    from pneu_control.robustness import scaled_plant
+    from pneu_control.analysis.metrics import WindowSpec
+    from pneu_control.experiment.robustness import scaled_plant
 
     spec = session.build_spec(
         axes=("rotary",),
@@ -137,7 +136,7 @@ def test_beats_eso_smc_on_the_paper_sine_over_seeds():
     ESO-SMC's (laser noise makes one run's e_max a poor statistic: compare means)."""
     from dataclasses import replace
 
-    from pneu_control.experiments import experiment_by_id
+    from pneu_control.experiment.catalog import experiment_by_id
 
     exp = experiment_by_id("sine_20mm_0p25hz")
 

@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus, ValveCurve
-from pneu_control.ctrl_params import (
+from pneu_control.controller.params import (
     MPYE_CHART_DU_V,
     MPYE_CHART_FLOW,
     load_controller_params,
 )
-from pneu_control.eso import eso_gains
-from pneu_control.eso_chain import ChainEso, chain_gains, chain_matrices
-from pneu_msgs_py.params import ParamError, with_updates
+from pneu_control.observers.eso import eso_gains
+from pneu_control.observers.eso_chain import ChainEso, chain_gains, chain_matrices
+from pneu_msgs_py.params.core import ParamError, with_updates
 
 T = 0.001
 

@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 from pneu_control.algorithms import make_algorithm
-from pneu_control.axis import AxisController
-from pneu_control.ctrl_params import load_controller_params
-from pneu_msgs_py.params import ParamError, with_updates
-from pneu_msgs_py.paths import config_file
-from pneu_msgs_py.units import MM_PER_M
-from pneu_sim.params import load_plant
-from pneu_sim.plant import Plant
+from pneu_control.controller.axis import AxisController
+from pneu_control.controller.params import load_controller_params
+from pneu_msgs_py.contract.units import MM_PER_M
+from pneu_msgs_py.params.core import ParamError, with_updates
+from pneu_msgs_py.params.paths import config_file
+from pneu_sim.physics.params import load_plant
+from pneu_sim.physics.plant import Plant
 
 RETUNED = config_file("controllers_retuned.yaml")
 DEFAULTS = config_file("controllers.yaml")

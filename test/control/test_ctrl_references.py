@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 import pytest
-from pneu_control.ctrl_params import ParamError, ReferenceParams
-from pneu_control.references import Waypoints, load_waypoints, make_reference
-from pneu_msgs_py.params import validate
+from pneu_control.controller.params import ParamError, ReferenceParams
+from pneu_control.controller.references import Waypoints, load_waypoints, make_reference
+from pneu_msgs_py.params.core import validate
 
 
 def _ref(axis="linear", **kw):

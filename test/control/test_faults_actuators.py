@@ -1,13 +1,13 @@
 """Encoder, valve, supply and load faults on the twin, in-process, with the supervisor.
 
 Fault at 0.5 s for 0.5 s; re-tuned ESO-SMC, linear sine 20 mm / 0.25 Hz,
-rotary 800 rpm (see :mod:`pneu_control.fault_table`).
+rotary 800 rpm (see :mod:`pneu_control.experiment.fault_table`).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from pneu_control.fault_table import Scenario, run_scenario
+from pneu_control.experiment.fault_table import Scenario, run_scenario
 
 F = "start_s=0.5,duration_s=0.5"
 K0 = 500

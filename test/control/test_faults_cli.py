@@ -9,15 +9,14 @@ import sys
 from pathlib import Path
 
 from mcap_ros2.reader import read_ros2_messages
+from pneu_control.cli import main as cli
 from pneu_msgs_py.bag.reader import read_run
-
-from pneu_control import cli
 
 
 def test_pneu_run_controller_silent_ends_safe_with_a_complete_bag(tmp_path):
     out = tmp_path / "silent"
     proc = subprocess.run(
-        [sys.executable, "-m", "pneu_control.cli", "run", "--fault", "controller_silent",
+        [sys.executable, "-m", "pneu_control.cli.main", "run", "--fault", "controller_silent",
          "--axis", "linear", "--duration", "3", "--out", str(out)],
         capture_output=True, text=True, env=dict(os.environ), timeout=300,
     )  # fmt: skip

@@ -11,14 +11,13 @@ import math
 
 import numpy as np
 import pytest
-from pneu_control.analysis import analyze
-from pneu_control.fault_table import Scenario, run_scenario
-from pneu_control.session import build_spec, execute
+from pneu_control.analysis.run_analysis import analyze
+from pneu_control.experiment import runner as runner_mod
+from pneu_control.experiment.fault_table import Scenario, run_scenario
+from pneu_control.experiment.session import build_spec, execute
 from pneu_msgs_py.bag.reader import read_run
-from pneu_msgs_py.params import ParamError
-from pneu_msgs_py.paths import config_file
-
-from pneu_control import runner as runner_mod
+from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.paths import config_file
 
 F = "start_s=0.5,duration_s=0.5"
 K0 = 500

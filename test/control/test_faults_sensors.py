@@ -10,7 +10,7 @@ the bag complete by our reader and by ``mcap_ros2``, the axis safe at the end.
 from __future__ import annotations
 
 import numpy as np
-from pneu_control.fault_table import Scenario, run_scenario
+from pneu_control.experiment.fault_table import Scenario, run_scenario
 
 F = "start_s=0.5,duration_s=0.5"
 K0 = 500  # first faulty sample (T = 1 ms)

@@ -1,4 +1,4 @@
-"""Fault specs: parsing, validation, timing, DAQ scaling, determinism (pneu_sim.faults)."""
+"""Fault specs: parsing, validation, timing, DAQ scaling, determinism (pneu_sim.faults.injection)."""
 
 from __future__ import annotations
 
@@ -6,10 +6,16 @@ import math
 
 import numpy as np
 import pytest
-from pneu_msgs_py.params import ParamError
-from pneu_sim.faults import FAULT_NAMES, FaultInjector, FaultSpec, SensorScaling, parse_fault
-from pneu_sim.params import load_plant
-from pneu_sim.plant import Plant
+from pneu_msgs_py.params.core import ParamError
+from pneu_sim.faults.injection import (
+    FAULT_NAMES,
+    FaultInjector,
+    FaultSpec,
+    SensorScaling,
+    parse_fault,
+)
+from pneu_sim.physics.params import load_plant
+from pneu_sim.physics.plant import Plant
 
 
 def test_parse_defaults_and_params():

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from pneu_control.metrics import WindowSpec, compute_metrics, moving_average, window_start
+from pneu_control.analysis.metrics import WindowSpec, compute_metrics, moving_average, window_start
 
 T = 1e-3
 
@@ -77,8 +77,8 @@ def test_bad_window_kind_refused():
 def test_controller_state_fields_are_the_contract_fields():
     import dataclasses
 
-    from pneu_control.axis import STATE_FIELDS, ControllerState
-    from pneu_msgs_py.topics import DEFAULT_STATE_FIELDS
+    from pneu_control.controller.axis import STATE_FIELDS, ControllerState
+    from pneu_msgs_py.contract.topics import DEFAULT_STATE_FIELDS
 
     names = tuple(f.name for f in dataclasses.fields(ControllerState) if f.name != "algorithm")
     assert names == STATE_FIELDS == DEFAULT_STATE_FIELDS

@@ -2,13 +2,12 @@
 
 import numpy as np
 import pytest
-from pneu_control.analysis import analyze
-from pneu_control.cli import main
-from pneu_control.replay import replay
+from pneu_control.analysis.run_analysis import analyze
+from pneu_control.cli.main import main
+from pneu_control.experiment import session
+from pneu_control.experiment.replay import replay
 from pneu_msgs_py.bag.reader import read_run
-from pneu_sim.params import load_plant
-
-from pneu_control import session
+from pneu_sim.physics.params import load_plant
 
 
 @pytest.fixture(scope="module")

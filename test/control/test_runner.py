@@ -4,11 +4,10 @@ import json
 
 import numpy as np
 import pytest
-from pneu_control.analysis import analyze
-from pneu_control.runner import RunSpec, run
-from pneu_sim.params import load_plant
-
-from pneu_control import session
+from pneu_control.analysis.run_analysis import analyze
+from pneu_control.experiment import session
+from pneu_control.experiment.runner import RunSpec, run
+from pneu_sim.physics.params import load_plant
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +35,7 @@ def _spec(
 
 def test_one_sample_transport_delay(plant):
     """u_k answers sample k and reaches the plant only over [k+1, k+2)."""
-    from pneu_sim.plant import Plant
+    from pneu_sim.physics.plant import Plant
 
     spec = _spec(plant, duration=0.2)
     res = run(spec)
@@ -90,7 +89,7 @@ def test_interrupted_run_leaves_a_readable_bag(plant, tmp_path, monkeypatch):
         if t >= 1.0:
             raise KeyboardInterrupt
 
-    from pneu_control import bag_log
+    from pneu_control.experiment import bag_log
 
     spec = _spec(plant, duration=5.0)
     with bag_log.open_run_bag(tmp_path / "run.mcap", spec, session.config_echo(spec)) as w:

@@ -4,14 +4,14 @@ import math
 import threading
 
 import pytest
-from pneu_driver.backend import SimBackend
-from pneu_driver.bench import TrivialPlant, loop_pacing
-from pneu_driver.errors import DriverError, LateCycleError
-from pneu_driver.loop import CommandSlot, DriverLoop, LoopStats
-from pneu_driver.rig import RigParams
-from pneu_driver.safety import SafetyParams, SafetySupervisor
-from pneu_driver.scaling import RawSample
-from pneu_msgs_py.params import with_updates
+from pneu_driver.bench.loop import TrivialPlant, loop_pacing
+from pneu_driver.daq.backend import SimBackend
+from pneu_driver.daq.errors import DriverError, LateCycleError
+from pneu_driver.daq.rig import RigParams
+from pneu_driver.daq.scaling import RawSample
+from pneu_driver.loop.driver_loop import CommandSlot, DriverLoop, LoopStats
+from pneu_driver.safety.supervisor import SafetyParams, SafetySupervisor
+from pneu_msgs_py.params.core import with_updates
 
 T = 1_000_000
 

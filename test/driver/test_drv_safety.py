@@ -5,7 +5,7 @@ import math
 from pathlib import Path
 
 import pytest
-from pneu_driver.safety import (
+from pneu_driver.safety.supervisor import (
     ERROR,
     OK,
     WARN,
@@ -13,8 +13,8 @@ from pneu_driver.safety import (
     SafetySupervisor,
     load_safety_params,
 )
-from pneu_msgs_py.params import ParamError, from_dict
-from pneu_msgs_py.samples import SensorSample
+from pneu_msgs_py.contract.samples import SensorSample
+from pneu_msgs_py.params.core import ParamError, from_dict
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 T_NS = 1_000_000

@@ -4,8 +4,8 @@ import math
 from pathlib import Path
 
 import pytest
-from pneu_driver.rig import RigParams, load_rig_params
-from pneu_driver.scaling import (
+from pneu_driver.daq.rig import RigParams, load_rig_params
+from pneu_driver.daq.scaling import (
     RawSample,
     Scaler,
     angle_rad,
@@ -16,8 +16,8 @@ from pneu_driver.scaling import (
     pressure_volts,
     unwrap_counts,
 )
-from pneu_msgs_py.params import ParamError, from_dict
-from pneu_msgs_py.samples import SensorSample
+from pneu_msgs_py.contract.samples import SensorSample
+from pneu_msgs_py.params.core import ParamError, from_dict
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 

@@ -14,7 +14,7 @@ from pneu_msgs_py.bag.cdr import (
     parse_fixed,
 )
 from pneu_msgs_py.bag.schemas import MSG_DEFINITIONS
-from pneu_msgs_py.topics import DEFAULT_STATE_FIELDS
+from pneu_msgs_py.contract.topics import DEFAULT_STATE_FIELDS
 from rosbags.typesys import Stores, get_typestore
 
 TS = get_typestore(Stores.ROS2_JAZZY)

@@ -7,7 +7,8 @@ import pytest
 import yaml
 from pneu_msgs_py.bag.cdr import fluid_pressure_layout, joint_state_layout
 from pneu_msgs_py.bag.schemas import MSG_DEFINITIONS, TYPE_HASHES
-from pneu_msgs_py.convert import (
+from pneu_msgs_py.contract import qos as Q
+from pneu_msgs_py.contract.convert import (
     DiagStatus,
     command_from_msg,
     command_to_typestore,
@@ -20,8 +21,8 @@ from pneu_msgs_py.convert import (
     sample_to_typestore,
     stamp_to_ns,
 )
-from pneu_msgs_py.samples import SensorSample
-from pneu_msgs_py.topics import (
+from pneu_msgs_py.contract.samples import SensorSample
+from pneu_msgs_py.contract.topics import (
     DEFAULT_STATE_FIELDS,
     TOPIC_BY_NAME,
     TOPICS,
@@ -30,8 +31,6 @@ from pneu_msgs_py.topics import (
 )
 from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys import Stores, get_typestore
-
-from pneu_msgs_py import qos as Q
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 
@@ -222,7 +221,7 @@ def test_diagnostics_round_trip():
 
 
 def test_sample_to_values_matches_the_writer_layout():
-    from pneu_msgs_py.convert import fill_joint_state, sample_to_values, typestore_messages
+    from pneu_msgs_py.contract.convert import fill_joint_state, sample_to_values, typestore_messages
 
     vals = sample_to_values(SAMPLE)
     assert vals["/pneu/pressure/motor_in"] == ("motor_in", [], [SAMPLE.p_m1], [])

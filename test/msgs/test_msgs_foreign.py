@@ -14,7 +14,7 @@ from mcap.writer import CompressionType, IndexType, Writer
 from mcap_ros2.decoder import DecoderFactory
 from pneu_msgs_py.bag.reader import iter_run, read_run
 from pneu_msgs_py.bag.schemas import MSG_DEFINITIONS
-from pneu_msgs_py.qos import SENSOR_DATA, offered_qos_yaml
+from pneu_msgs_py.contract.qos import SENSOR_DATA, offered_qos_yaml
 from rosbags.typesys import Stores, get_typestore
 
 TS = get_typestore(Stores.ROS2_JAZZY)

@@ -16,10 +16,10 @@ from pneu_msgs_py.bag import (
     TruncatedBagWarning,
     UnknownSchemaError,
 )
-from pneu_msgs_py.bag.bench import write_synthetic_run
 from pneu_msgs_py.bag.reader import read_run
 from pneu_msgs_py.bag.writer import BagWriter
-from pneu_msgs_py.topics import DEFAULT_STATE_FIELDS
+from pneu_msgs_py.bench.bag import write_synthetic_run
+from pneu_msgs_py.contract.topics import DEFAULT_STATE_FIELDS
 
 T0 = 1_700_000_000_000_000_000
 N = 3000
@@ -230,7 +230,7 @@ def test_truncated_file_yields_complete_chunks(run, tmp_path):
 _CHILD = """
 import os, signal, sys
 from pneu_msgs_py.bag.writer import BagWriter
-from pneu_msgs_py.samples import SensorSample
+from pneu_msgs_py.contract.samples import SensorSample
 w = BagWriter(sys.argv[1], chunk_size=8 * 1024, metadata={"pneu.run": {"seed": "1"}})
 if sys.argv[2] == "term":  # what the runner does: close() on SIGTERM
     signal.signal(signal.SIGTERM, lambda *a: (w.close(), sys.exit(0)))

@@ -9,10 +9,10 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from pneu_msgs_py.bag.errors import BagWriteError
 from pneu_msgs_py.bag.writer import BagWriter
-from pneu_msgs_py.convert import DiagStatus
-from pneu_msgs_py.qos import parse_offered_qos_yaml
-from pneu_msgs_py.samples import SensorSample
-from pneu_msgs_py.topics import DEFAULT_STATE_FIELDS, qos_for
+from pneu_msgs_py.contract.convert import DiagStatus
+from pneu_msgs_py.contract.qos import parse_offered_qos_yaml
+from pneu_msgs_py.contract.samples import SensorSample
+from pneu_msgs_py.contract.topics import DEFAULT_STATE_FIELDS, qos_for
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 

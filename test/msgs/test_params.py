@@ -3,7 +3,7 @@
 from dataclasses import dataclass
 
 import pytest
-from pneu_msgs_py.params import ParamError, describe, flatten, from_dict, param, with_updates
+from pneu_msgs_py.params.core import ParamError, describe, flatten, from_dict, param, with_updates
 
 
 @dataclass(frozen=True)

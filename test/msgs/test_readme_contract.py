@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from pneu_msgs_py.topics import markdown_table
+from pneu_msgs_py.contract.topics import markdown_table
 
 
 def test_readme_topic_table_matches_contract():

@@ -564,10 +564,10 @@ def _modules() -> dict[str, types.ModuleType]:
 
 
 NODE_MODULES = (
-    "pneu_sim.sim_node",
-    "pneu_control.controller_node",
-    "pneu_control.logger_node",
-    "pneu_driver.driver_node",
+    "pneu_sim.nodes.sim_node",
+    "pneu_control.nodes.controller_node",
+    "pneu_control.nodes.logger_node",
+    "pneu_driver.nodes.driver_node",
 )
 
 

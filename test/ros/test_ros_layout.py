@@ -227,15 +227,17 @@ def test_setup_cfg_script_dirs(pkg):
 
 def test_node_executables_are_registered():
     scripts = {pkg: _console_scripts(pkg) for pkg in PACKAGES}
-    assert scripts["pneu_sim"]["sim_node"] == "pneu_sim.sim_node:main"
-    assert scripts["pneu_driver"]["driver_node"] == "pneu_driver.driver_node:main"
+    assert scripts["pneu_sim"]["sim_node"] == "pneu_sim.nodes.sim_node:main"
+    assert scripts["pneu_driver"]["driver_node"] == "pneu_driver.nodes.driver_node:main"
     assert (
-        scripts["pneu_control"]["linear_controller"] == "pneu_control.controller_node:main_linear"
+        scripts["pneu_control"]["linear_controller"]
+        == "pneu_control.nodes.controller_node:main_linear"
     )
     assert (
-        scripts["pneu_control"]["rotary_controller"] == "pneu_control.controller_node:main_rotary"
+        scripts["pneu_control"]["rotary_controller"]
+        == "pneu_control.nodes.controller_node:main_rotary"
     )
-    assert scripts["pneu_control"]["logger"] == "pneu_control.logger_node:main"
+    assert scripts["pneu_control"]["logger"] == "pneu_control.nodes.logger_node:main"
 
 
 # --- launch files, executed against stand-ins -------------------------------
@@ -311,7 +313,7 @@ def _run_launch(path: Path, overrides: dict[str, str]) -> list[_Action]:
 
 def _declared_params(pkg: str, module: str) -> set[str]:
     """Names passed as a constant to ``declare_parameter`` in a node module."""
-    tree = ast.parse((SRC / pkg / pkg / f"{module}.py").read_text(encoding="utf-8"))
+    tree = ast.parse((SRC / pkg / pkg / "nodes" / f"{module}.py").read_text(encoding="utf-8"))
     out = set()
     for node in ast.walk(tree):
         if (
@@ -327,9 +329,9 @@ def _declared_params(pkg: str, module: str) -> set[str]:
 
 def _node_param_types(package: str, executable: str) -> dict[str, type]:
     """Every parameter a node declares, with its type (dataclass-declared ones included)."""
-    from pneu_control.ctrl_params import AxisControllerParams
-    from pneu_msgs_py.params import describe
-    from pneu_sim.lockstep import SimNodeParams
+    from pneu_control.controller.params import AxisControllerParams
+    from pneu_msgs_py.params.core import describe
+    from pneu_sim.nodes.sim_core import SimNodeParams
 
     base = {"use_sim_time": bool}
     if (package, executable) == ("pneu_sim", "sim_node"):
@@ -422,4 +424,4 @@ def test_reference_argument_becomes_typed_reference_parameters():
 def test_param_types_helper_sees_dataclass_fields():
     types_ = _node_param_types("pneu_control", "linear_controller")
     assert types_["eso_smc.epsilon"] is float and "controllers_file" in types_
-    assert dataclasses.is_dataclass(__import__("pneu_sim.lockstep").lockstep.SimNodeParams)
+    assert dataclasses.is_dataclass(__import__("pneu_sim.nodes.sim_core").nodes.sim_core.SimNodeParams)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 
 import pytest
-from pneu_msgs_py.params import ParamError, from_dict, validate
-from pneu_msgs_py.samples import NEUTRAL_V, SensorSample
-from pneu_sim.lockstep import LockstepCore, SimNodeParams, active_axes
+from pneu_msgs_py.contract.samples import NEUTRAL_V, SensorSample
+from pneu_msgs_py.params.core import ParamError, from_dict, validate
+from pneu_sim.nodes.sim_core import LockstepCore, SimNodeParams, active_axes
 
 T_NS = 1_000_000
 
@@ -52,7 +52,7 @@ def test_lockstep_applies_u_k_minus_1_like_the_runner():
         assert core.offer("linear", s.stamp_ns, fake_controller(s)) == "accepted"
         assert core.complete
         s = core.advance()
-        # runner side (pneu_control.runner.run): u_k = update(s_k); s_{k+1} = step(u_{k-1})
+        # runner side (pneu_control.experiment.runner.run): u_k = update(s_k); s_{k+1} = step(u_{k-1})
         u = fake_controller(rs)
         rs = ref_plant.step(u_hold, NEUTRAL_V)
         u_hold = u
@@ -218,9 +218,9 @@ def test_sim_node_params_validate():
 
 
 def test_injected_faults_act_where_the_runner_applies_them():
-    from pneu_sim.faults import parse_faults
-    from pneu_sim.params import load_plant
-    from pneu_sim.plant import Plant
+    from pneu_sim.faults.injection import parse_faults
+    from pneu_sim.physics.params import load_plant
+    from pneu_sim.physics.plant import Plant
 
     faults = parse_faults(
         [

@@ -11,21 +11,20 @@ import json
 
 import numpy as np
 import pytest
-from pneu_control.analysis import analyze
-from pneu_control.lockstep import run_loopback
-from pneu_control.logger_core import (
+from pneu_control.analysis.run_analysis import analyze
+from pneu_control.experiment import session
+from pneu_control.experiment.runner import run
+from pneu_control.nodes.logger_core import (
     LOGGED_TOPICS,
     LoggerCore,
     run_config_from_params,
     stamp_from_cdr,
 )
-from pneu_control.runner import run
-from pneu_msgs_py.convert import typestore_messages
-from pneu_msgs_py.ros_params import values_to_overrides
-from pneu_msgs_py.topics import TOPIC_BY_NAME
+from pneu_control.nodes.loopback import run_loopback
+from pneu_msgs_py.contract.convert import typestore_messages
+from pneu_msgs_py.contract.topics import TOPIC_BY_NAME
+from pneu_msgs_py.params.ros import values_to_overrides
 from rosbags.highlevel import AnyReader
-
-from pneu_control import session
 
 TS = typestore_messages()
 T = TS.types

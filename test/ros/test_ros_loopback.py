@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pneu_control.lockstep import run_loopback
-from pneu_control.runner import run
-from pneu_driver.safety import SafetyParams, SafetySupervisor
-
-from pneu_control import session
+from pneu_control.experiment import session
+from pneu_control.experiment.runner import run
+from pneu_control.nodes.loopback import run_loopback
+from pneu_driver.safety.supervisor import SafetyParams, SafetySupervisor
 
 
 def _assert_identical(a, b, states=True):

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from pneu_msgs_py.params import ParamError, flatten, param, validate
-from pneu_msgs_py.ros_params import (
+from pneu_msgs_py.params.core import ParamError, flatten, param, validate
+from pneu_msgs_py.params.ros import (
     PARAMETER_TYPE,
     allowed_text,
     coerce_value,
@@ -187,7 +187,7 @@ def test_allowed_text_and_overrides_roundtrip():
 
 
 def test_real_controller_params_declare_and_round_trip_for_both_axes():
-    from pneu_control.ctrl_params import load_controller_params
+    from pneu_control.controller.params import load_controller_params
 
     for axis in ("linear", "rotary"):
         params = load_controller_params(axis)

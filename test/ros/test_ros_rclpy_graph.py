@@ -13,11 +13,10 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 import yaml  # noqa: E402
-from pneu_control.analysis import analyze  # noqa: E402
-from pneu_control.metrics import WindowSpec  # noqa: E402
-from pneu_control.runner import run  # noqa: E402
-
-from pneu_control import session  # noqa: E402
+from pneu_control.analysis.metrics import WindowSpec  # noqa: E402
+from pneu_control.analysis.run_analysis import analyze  # noqa: E402
+from pneu_control.experiment import session  # noqa: E402
+from pneu_control.experiment.runner import run  # noqa: E402
 
 DURATION_S = 5.0
 SEED = 3
@@ -67,9 +66,9 @@ def _params_file(tmp_path, out):
 
 
 def test_lockstep_graph_equals_in_process_runner(ros, tmp_path):
-    from pneu_control.controller_node import ControllerNode
-    from pneu_control.logger_node import LoggerNode
-    from pneu_sim.sim_node import SimNode
+    from pneu_control.nodes.controller_node import ControllerNode
+    from pneu_control.nodes.logger_node import LoggerNode
+    from pneu_sim.nodes.sim_node import SimNode
     from rclpy.executors import SingleThreadedExecutor
 
     out = tmp_path / "run"

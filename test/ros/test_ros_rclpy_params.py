@@ -12,7 +12,7 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 import yaml  # noqa: E402
-from pneu_msgs_py.samples import SensorSample  # noqa: E402
+from pneu_msgs_py.contract.samples import SensorSample  # noqa: E402
 
 
 @pytest.fixture
@@ -24,7 +24,7 @@ def ros():
 
 @pytest.fixture
 def graph(ros):
-    from pneu_control.controller_node import ControllerNode
+    from pneu_control.nodes.controller_node import ControllerNode
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter_client import AsyncParameterClient
@@ -48,8 +48,8 @@ def graph(ros):
 
 
 def _feed_one_sample(ctrl, k=0):
-    from pneu_control.shell_core import SENSOR_TOPICS
-    from pneu_sim.lockstep import fill_sample_messages
+    from pneu_control.nodes.controller_core import SENSOR_TOPICS
+    from pneu_sim.nodes.sim_core import fill_sample_messages
     from sensor_msgs.msg import FluidPressure, JointState
 
     msgs = {t: (FluidPressure() if "pressure" in t else JointState()) for t in SENSOR_TOPICS}
@@ -130,7 +130,7 @@ def test_algorithm_switch_is_live(graph):
 
 def test_param_dump_is_accepted_back_as_params_file(graph, tmp_path):
     """What `ros2 param dump` prints (ros2param/verb/dump.py, Jazzy) re-loads with --params-file."""
-    from pneu_control.controller_node import ControllerNode
+    from pneu_control.nodes.controller_node import ControllerNode
     from rclpy.parameter import Parameter, parameter_value_to_python
 
     ctrl, client, call = graph

@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pneu_control.axis import STATE_FIELDS, AxisController
-from pneu_control.ctrl_params import load_controller_params
-from pneu_control.shell_core import (
+from pneu_control.controller.axis import STATE_FIELDS, AxisController
+from pneu_control.controller.params import load_controller_params
+from pneu_control.nodes.controller_core import (
     SENSOR_TOPICS,
     ControllerShellCore,
     SampleAssembler,
@@ -15,9 +15,13 @@ from pneu_control.shell_core import (
     bench_shell_us_per_sample,
     new_sensor_messages,
 )
-from pneu_msgs_py.convert import command_from_msg, controller_state_from_msg, typestore_messages
-from pneu_msgs_py.samples import SensorSample
-from pneu_sim.lockstep import fill_sample_messages
+from pneu_msgs_py.contract.convert import (
+    command_from_msg,
+    controller_state_from_msg,
+    typestore_messages,
+)
+from pneu_msgs_py.contract.samples import SensorSample
+from pneu_sim.nodes.sim_core import fill_sample_messages
 
 TYPES = typestore_messages().types
 JS = "sensor_msgs/msg/JointState"
@@ -95,7 +99,7 @@ def test_diagnostics_report_counts_and_warn_on_lost_ticks():
 
 
 def test_live_parameter_change_takes_effect_at_the_next_sample():
-    from pneu_msgs_py.params import with_updates
+    from pneu_msgs_py.params.core import with_updates
 
     params = load_controller_params("linear")
     core = ControllerShellCore("linear", params)

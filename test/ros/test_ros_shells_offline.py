@@ -27,11 +27,10 @@ _spec = importlib.util.spec_from_file_location(
 fake = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(fake)
 
-from pneu_control.analysis import analyze  # noqa: E402
-from pneu_control.metrics import WindowSpec  # noqa: E402
-from pneu_control.runner import run  # noqa: E402
-
-from pneu_control import session  # noqa: E402
+from pneu_control.analysis.metrics import WindowSpec  # noqa: E402
+from pneu_control.analysis.run_analysis import analyze  # noqa: E402
+from pneu_control.experiment import session  # noqa: E402
+from pneu_control.experiment.runner import run  # noqa: E402
 
 DURATION_S = 1.0
 WINDOW_S = 0.5
@@ -77,9 +76,9 @@ def test_lockstep_graph_through_the_node_modules_equals_the_runner(world, tmp_pa
             "/logger": {"out": str(tmp_path), "mode": "lockstep", "use_sim_time": True},
         }
     )
-    from pneu_control.controller_node import ControllerNode
-    from pneu_control.logger_node import LoggerNode
-    from pneu_sim.sim_node import SimNode
+    from pneu_control.nodes.controller_node import ControllerNode
+    from pneu_control.nodes.logger_node import LoggerNode
+    from pneu_sim.nodes.sim_node import SimNode
     from rclpy.executors import SingleThreadedExecutor
 
     logger, ctrl = LoggerNode(), ControllerNode("linear")
@@ -124,10 +123,10 @@ def test_lockstep_graph_through_the_node_modules_equals_the_runner(world, tmp_pa
 
 
 def test_controller_parameters_live(world):
-    from pneu_control.controller_node import ControllerNode
-    from pneu_control.shell_core import SENSOR_TOPICS
-    from pneu_msgs_py.samples import SensorSample
-    from pneu_sim.lockstep import fill_sample_messages
+    from pneu_control.nodes.controller_core import SENSOR_TOPICS
+    from pneu_control.nodes.controller_node import ControllerNode
+    from pneu_msgs_py.contract.samples import SensorSample
+    from pneu_sim.nodes.sim_core import fill_sample_messages
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import FluidPressure, JointState
 
@@ -191,7 +190,7 @@ def test_controller_parameters_live(world):
 
 def test_controller_exits_1_with_one_line_on_a_bad_startup_value(world, capsys):
     world.overrides["/linear_controller"] = {"algorithm": "bang_bang"}
-    import pneu_control.controller_node as cn
+    import pneu_control.nodes.controller_node as cn
 
     assert cn.main_linear() == 1
     err = capsys.readouterr().err.strip().splitlines()
@@ -200,7 +199,7 @@ def test_controller_exits_1_with_one_line_on_a_bad_startup_value(world, capsys):
 
 def test_sim_estop_and_reset_services(world):
     world.overrides["/pneu_sim"] = {"mode": "lockstep", "axes": "linear", "safety": True}
-    from pneu_sim.sim_node import SimNode
+    from pneu_sim.nodes.sim_node import SimNode
 
     sim = SimNode()
     r = world.call("/pneu_sim/estop")
@@ -211,7 +210,7 @@ def test_sim_estop_and_reset_services(world):
 
 
 def test_driver_without_daq_names_the_device_and_exits_1(world, capsys):
-    import pneu_driver.driver_node as dn
+    import pneu_driver.nodes.driver_node as dn
 
     assert dn.main() == 1
     err = capsys.readouterr().err.strip().splitlines()
@@ -223,12 +222,12 @@ def test_driver_node_with_the_twin_behind_the_daq_publishes_forwards_and_ends_sa
     world, tmp_path, monkeypatch
 ):
     """The driver shell around DriverLoop, with SimBackend in place of nidaqmx (software pacing)."""
-    import pneu_driver.driver_node as dn
+    import pneu_driver.nodes.driver_node as dn
     import yaml
-    from pneu_driver.backend import SimBackend
-    from pneu_msgs_py.paths import config_file
-    from pneu_sim.params import load_plant
-    from pneu_sim.plant import Plant
+    from pneu_driver.daq.backend import SimBackend
+    from pneu_msgs_py.params.paths import config_file
+    from pneu_sim.physics.params import load_plant
+    from pneu_sim.physics.plant import Plant
     from rclpy.executors import SingleThreadedExecutor
 
     rig = yaml.safe_load(config_file("rig.yaml").read_text())
@@ -245,7 +244,7 @@ def test_driver_node_with_the_twin_behind_the_daq_publishes_forwards_and_ends_sa
     monkeypatch.setattr(dn, "visible_devices", lambda device: [device])
     world.overrides["/pneu_driver"] = {"rig_file": str(rig_file), "axes": "linear"}
     world.overrides["/linear_controller"] = {"mode": "realtime"}
-    from pneu_control.controller_node import ControllerNode
+    from pneu_control.nodes.controller_node import ControllerNode
 
     drv, ctrl = dn.DriverNode(), ControllerNode("linear")
     ex = SingleThreadedExecutor()
@@ -276,7 +275,7 @@ def test_sim_open_loop_lockstep_runs_to_its_duration(world):
         "lockstep.min_subscribers": 0,
         "lockstep.settle_s": 0.0,
     }
-    from pneu_sim.sim_node import SimNode
+    from pneu_sim.nodes.sim_node import SimNode
     from rclpy.executors import SingleThreadedExecutor
 
     sim = SimNode()

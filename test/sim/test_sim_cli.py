@@ -6,9 +6,8 @@ import csv
 import numpy as np
 import pytest
 import yaml
-from pneu_msgs_py.paths import config_file
-
-from pneu_sim import cli_sim
+from pneu_msgs_py.params.paths import config_file
+from pneu_sim.cli import sim as cli_sim
 
 
 def parse(argv):

@@ -4,11 +4,10 @@ import math
 
 import numpy as np
 import pytest
-from pneu_msgs_py.params import with_updates
-from pneu_sim.params import PlantParams
-from pneu_sim.plant import Plant
-
-from pneu_sim import kernel as k
+from pneu_msgs_py.params.core import with_updates
+from pneu_sim.physics import kernel as k
+from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.plant import Plant
 
 
 def inputs(n, T=1e-3):

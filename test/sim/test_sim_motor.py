@@ -4,13 +4,12 @@ import math
 
 import numpy as np
 import pytest
-from pneu_msgs_py.params import with_updates
-from pneu_msgs_py.units import RPM_PER_RAD_S
-from pneu_sim.pack import pack_params
-from pneu_sim.params import PlantParams
-from pneu_sim.plant import Plant
-
-from pneu_sim import kernel as k
+from pneu_msgs_py.contract.units import RPM_PER_RAD_S
+from pneu_msgs_py.params.core import with_updates
+from pneu_sim.physics import kernel as k
+from pneu_sim.physics.pack import pack_params
+from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.plant import Plant
 
 
 def steady(plant, u_r, t_settle=2.0, t_avg=1.0):

@@ -5,10 +5,10 @@ import math
 
 import pytest
 import yaml
-from pneu_msgs_py.params import ParamError, with_updates
-from pneu_msgs_py.paths import config_file
-from pneu_sim.params import PlantParams, load_plant, params_from_tree
-from pneu_sim.plant import Plant
+from pneu_msgs_py.params.core import ParamError, with_updates
+from pneu_msgs_py.params.paths import config_file
+from pneu_sim.physics.params import PlantParams, load_plant, params_from_tree
+from pneu_sim.physics.plant import Plant
 
 
 @pytest.fixture(scope="module")

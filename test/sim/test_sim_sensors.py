@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 import pytest
-from pneu_msgs_py.params import with_updates
-from pneu_sim.params import PlantParams
-from pneu_sim.plant import Plant
+from pneu_msgs_py.params.core import with_updates
+from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.plant import Plant
 
 SEALED = {"valve_linear.leak_fraction": 0.0, "valve_rotary.leak_fraction": 0.0}
 

@@ -4,12 +4,11 @@ import math
 
 import numpy as np
 import pytest
-from pneu_msgs_py.params import with_updates
-from pneu_sim.pack import pack_params, spool_zoh, valve_max_area
-from pneu_sim.params import PlantParams
-from pneu_sim.plant import Plant
-
-from pneu_sim import kernel as k
+from pneu_msgs_py.params.core import with_updates
+from pneu_sim.physics import kernel as k
+from pneu_sim.physics.pack import pack_params, spool_zoh, valve_max_area
+from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.plant import Plant
 
 B = 0.29
 B_LAM = 0.999

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from ..ctrl_params import AxisControllerParams
-from .base import Algorithm
-from .eso_smc import EsoSmc
-from .eso_smc_plus import EsoSmcPlus
-from .ladrc import Ladrc
-from .pid import Pid
+from pneu_control.algorithms.base import Algorithm
+from pneu_control.algorithms.eso_smc import EsoSmc
+from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus
+from pneu_control.algorithms.ladrc import Ladrc
+from pneu_control.algorithms.pid import Pid
+from pneu_control.controller.params import AxisControllerParams
 
 __all__ = [
     "Algorithm",

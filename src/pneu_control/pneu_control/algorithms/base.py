@@ -3,7 +3,7 @@
 Algorithms work in the paper's units (DESIGN §5): y in mm (linear position)
 or rpm (rotary speed), the reference as (r, ṙ, r̈) in the same units, the
 command as the valve-voltage deviation from the neutral 5 V (V). The
-:class:`~pneu_control.axis.AxisController` converts SI at its boundary, runs
+:class:`~pneu_control.controller.axis.AxisController` converts SI at its boundary, runs
 the tracking differentiator when ``uses_td`` and adds the neutral voltage.
 
 Per sample the controller calls exactly one of

@@ -20,7 +20,7 @@ pole at −λ; with ṡ = 0 the error decays as (1 + λt) e^{−λt}.
 sat (Eq. 29): sign(s) for |s| > Δ, k s inside. Continuous only for k = 1/Δ;
 the paper's k = 0.5, Δ = 0.1 is accepted (discontinuous) as printed. The
 discrete boundary layer s(k+1) = s(k) − T ε k s(k−1) needs T ε k < 1
-(checked by :class:`~pneu_control.ctrl_params.AxisControllerParams`).
+(checked by :class:`~pneu_control.controller.params.AxisControllerParams`).
 
 ∫e uses the rectangle rule. With ``integral_anti_windup`` (conditional
 integration) the step is skipped while e pushes further into a saturation:
@@ -57,10 +57,10 @@ from __future__ import annotations
 
 import math
 
-from pneu_msgs_py.units import RPM_PER_RAD_S
+from pneu_msgs_py.contract.units import RPM_PER_RAD_S
 
-from ..ctrl_params import AxisControllerParams
-from ..eso import eso_gains
+from pneu_control.controller.params import AxisControllerParams
+from pneu_control.observers.eso import eso_gains
 
 __all__ = ["EsoSmc", "friction_gain_max"]
 
@@ -167,7 +167,7 @@ class EsoSmc:
 
     def update(self, y, r, r_dot, r_ddot, u_applied):
         T = self.T
-        # ESO, Eq. 18 discretised (pneu_control.eso.LinearEso.update), f_k held
+        # ESO, Eq. 18 discretised (pneu_control.observers.eso.LinearEso.update), f_k held
         z2, z3 = self.z2, self.z3
         self.u_in = u_applied
         acc = z3 + self.b0 * u_applied + self.f_k

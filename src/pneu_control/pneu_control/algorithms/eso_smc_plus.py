@@ -9,7 +9,7 @@ fixed per errata); three model-based changes feed them better information.
    angle third order. With θ in rpm·s (θ̇ = ω in rpm)::
 
        θ‴ = f + b0 u,   z = (θ̂, ω̂, ω̇̂, f̂)   (4-state ESO, all poles at −ω0,
-                                                 :mod:`pneu_control.eso_chain`)
+                                                 :mod:`pneu_control.observers.eso_chain`)
 
    The paper's surface on the speed error e_ω = ω_r − ω contains ∫e_ω dt,
    which *is* the angle error e_θ = θ_r − θ with θ_r = ∫ω_r dt. ESO-SMC
@@ -130,9 +130,9 @@ from __future__ import annotations
 import bisect
 import math
 
-from ..ctrl_params import AxisControllerParams
-from ..eso import eso_gains
-from ..eso_chain import chain_gains
+from pneu_control.controller.params import AxisControllerParams
+from pneu_control.observers.eso import eso_gains
+from pneu_control.observers.eso_chain import chain_gains
 
 __all__ = ["EsoSmcPlus", "ValveCurve"]
 
@@ -358,7 +358,7 @@ class EsoSmcPlus:
             ffp = self.ff_pipe
             v_in -= ffp[0]
             del ffp[0]
-        # 3-state ESO (Eq. 18, exact ZOH current observer, pneu_control.eso)
+        # 3-state ESO (Eq. 18, exact ZOH current observer, pneu_control.observers.eso)
         z2, z3 = self.z2, self.z3
         acc = z3 + self.b0 * v_in
         z1p = self.z1 + T * z2 + self.T2h * acc

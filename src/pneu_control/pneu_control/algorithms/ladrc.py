@@ -11,7 +11,7 @@ so that with z3 = f the loop is ÿ = u0: a critically damped pair at −λ1
 b0 error is small; we implement the gains as printed and leave the verdict to
 the twin (DESIGN §5). Units: mm or rpm; λ1 1/s; b0 (mm|rpm)/s²/V.
 
-The ESO is the exact-ZOH current observer of :mod:`pneu_control.eso`
+The ESO is the exact-ZOH current observer of :mod:`pneu_control.observers.eso`
 (inlined here for speed, same arithmetic); it is fed the saturated command
 that was on the valve, so z3 never winds up.
 """
@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import math
 
-from ..ctrl_params import AxisControllerParams
-from ..eso import eso_gains
-from .base import NAN
+from pneu_control.algorithms.base import NAN
+from pneu_control.controller.params import AxisControllerParams
+from pneu_control.observers.eso import eso_gains
 
 __all__ = ["Ladrc"]
 
@@ -71,7 +71,7 @@ class Ladrc:
         return self.hi if u > self.hi else (self.lo if u < self.lo else u)
 
     def update(self, y, r, r_dot, r_ddot, u_applied):
-        # ESO, Eq. 18 discretised (pneu_control.eso.LinearEso.update)
+        # ESO, Eq. 18 discretised (pneu_control.observers.eso.LinearEso.update)
         T = self.T
         z2, z3 = self.z2, self.z3
         self.u_in = u_applied

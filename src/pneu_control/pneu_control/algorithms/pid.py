@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import math
 
-from ..ctrl_params import AxisControllerParams
-from .base import NAN
+from pneu_control.algorithms.base import NAN
+from pneu_control.controller.params import AxisControllerParams
 
 __all__ = ["Pid"]
 

@@ -1,6 +1,6 @@
 """MCAP bags of pneu runs: writer, reader, schemas, bulk CDR, errors, benchmarks."""
 
-from .errors import (
+from pneu_msgs_py.bag.errors import (
     BagError,
     BagWriteError,
     EmptyBagError,
@@ -11,7 +11,7 @@ from .errors import (
     TruncatedBagWarning,
     UnknownSchemaError,
 )
-from .writer import BagWriter, DiagStatus
+from pneu_msgs_py.bag.writer import BagWriter, DiagStatus
 
 __all__ = [
     "BagWriter",

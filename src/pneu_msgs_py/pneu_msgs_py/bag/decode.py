@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import mcap_records as R
-from .cdr import CdrDecodeError, FixedLayout, layout_of, parse_fixed
+from pneu_msgs_py.bag import mcap_records as R
+from pneu_msgs_py.bag.cdr import CdrDecodeError, FixedLayout, layout_of, parse_fixed
 
 __all__ = ["Piece", "ChannelDecoder", "FIXED_TYPES"]
 
@@ -244,7 +244,7 @@ class ChannelDecoder:
 
     def _objects(self, data, offs, sizes, log_t, pub_t) -> Piece:
         """Variable-layout types: deserialize each message with the rosbags typestore."""
-        from ..convert import _typestore, diag_statuses_from_msg, stamp_to_ns
+        from pneu_msgs_py.contract.convert import _typestore, diag_statuses_from_msg, stamp_to_ns
 
         ts = _typestore()
         objs = []

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import mcap_records as R
-from .errors import BagError, NotMcapError, NotRos2Error, TruncatedBagError
+from pneu_msgs_py.bag import mcap_records as R
+from pneu_msgs_py.bag.errors import BagError, NotMcapError, NotRos2Error, TruncatedBagError
 
 __all__ = ["McapFile", "SchemaInfo", "ChannelInfo", "Chunk", "CorruptBagError"]
 

@@ -36,10 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..qos import QosProfile, parse_offered_qos_yaml
-from .cdr import CdrDecodeError
-from .decode import FIXED_TYPES, ChannelDecoder, Piece
-from .errors import (
+from pneu_msgs_py.bag.cdr import CdrDecodeError
+from pneu_msgs_py.bag.decode import FIXED_TYPES, ChannelDecoder, Piece
+from pneu_msgs_py.bag.errors import (
     BagError,
     EmptyBagError,
     MissingTopicError,
@@ -49,7 +48,8 @@ from .errors import (
     TruncatedBagWarning,
     UnknownSchemaError,
 )
-from .mcap_file import CorruptBagError, McapFile, walk_offsets
+from pneu_msgs_py.bag.mcap_file import CorruptBagError, McapFile, walk_offsets
+from pneu_msgs_py.contract.qos import QosProfile, parse_offered_qos_yaml
 
 __all__ = [
     "RunData",

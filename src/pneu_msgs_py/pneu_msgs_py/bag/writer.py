@@ -30,11 +30,26 @@ from typing import Any
 
 import numpy as np
 
-from .. import __version__
-from ..convert import DiagStatus, _typestore, diagnostics_to_typestore
-from ..qos import MODES, QosProfile, offered_qos_yaml
-from ..samples import AXES, SensorSample
-from ..topics import (
+from pneu_msgs_py import __version__
+from pneu_msgs_py.bag import mcap_records as R
+from pneu_msgs_py.bag.cdr import (
+    FixedLayout,
+    clock_layout,
+    fluid_pressure_layout,
+    joint_state_layout,
+)
+from pneu_msgs_py.bag.errors import BagWriteError
+from pneu_msgs_py.bag.schemas import (
+    MESSAGE_ENCODING,
+    MSG_DEFINITIONS,
+    PROFILE,
+    SCHEMA_ENCODING,
+    TYPE_HASHES,
+)
+from pneu_msgs_py.contract.convert import DiagStatus, _typestore, diagnostics_to_typestore
+from pneu_msgs_py.contract.qos import MODES, QosProfile, offered_qos_yaml
+from pneu_msgs_py.contract.samples import AXES, SensorSample
+from pneu_msgs_py.contract.topics import (
     CLOCK_TOPIC,
     CONTROLLER_STATE_TOPIC,
     DEFAULT_STATE_FIELDS,
@@ -46,10 +61,6 @@ from ..topics import (
     qos_for,
     valve_joint,
 )
-from . import mcap_records as R
-from .cdr import FixedLayout, clock_layout, fluid_pressure_layout, joint_state_layout
-from .errors import BagWriteError
-from .schemas import MESSAGE_ENCODING, MSG_DEFINITIONS, PROFILE, SCHEMA_ENCODING, TYPE_HASHES
 
 __all__ = ["BagWriter", "DiagStatus", "COMPRESSIONS"]
 

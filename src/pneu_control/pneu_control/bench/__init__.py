@@ -1,0 +1,1 @@
+"""Benchmarks of the controller cores (timed by ``pneu bench``, never by tests)."""

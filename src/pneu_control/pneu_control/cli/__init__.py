@@ -1,0 +1,1 @@
+"""The ``pneu`` command: one module per subcommand, dispatched by :mod:`.main`."""

@@ -1,0 +1,55 @@
+"""``pneu analyze``: the paper's metrics of a recorded run, from the bag alone."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+from pneu_control.analysis.metrics import WindowSpec
+from pneu_control.analysis.run_analysis import analyze
+
+NAME = "analyze"
+HELP = "metrics (e_max, RMSE per axis, DESIGN §7) of a run bag (.mcap file or rosbag2 directory)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run", metavar="RUN", help=".mcap file or rosbag2 directory")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument(
+        "--window-start",
+        type=float,
+        default=None,
+        metavar="S",
+        help="steady-state window start (default: from the bag's metadata)",
+    )
+    p.add_argument(
+        "--include-faults",
+        action="store_true",
+        help="compute the metrics over the fault intervals too (default: they are left out)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    window = (
+        None if args.window_start is None else WindowSpec(kind="fixed", t_start_s=args.window_start)
+    )
+    res = analyze(args.run, window=window, include_faults=args.include_faults)
+    if args.json:
+        print(json.dumps(res.to_dict(), indent=2, sort_keys=True))
+        return 0
+    for w in res.warnings:
+        print(f"warning: {w}")
+    for iv in res.faults:
+        end = "end" if math.isinf(iv.end_s) else f"{iv.end_s:.3f} s"
+        what = "fault injected" if iv.kind == "injected" else "valve held safe"
+        note = "included in" if res.include_faults else "excluded from"
+        print(f"{iv.axis:7s} {what}: {iv.start_s:.3f} s – {end} ({iv.cause}); {note} the metrics")
+    for axis, m in res.metrics.items():
+        alg = res.traces[axis].algorithm
+        ws = "never" if math.isnan(m.window_start_s) else f"{m.window_start_s:.2f}"
+        print(
+            f"{axis:7s} {alg:12s} e_max = {m.e_max:.4f} {m.unit}   RMSE = {m.rmse:.4f} {m.unit}"
+            f"   window {ws}–{m.window_end_s:.2f} s ({m.n_samples} samples)"
+        )
+    return 0

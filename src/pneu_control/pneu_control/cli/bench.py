@@ -1,0 +1,163 @@
+"""``pneu bench``: speed figures of the stack (rates and ratios, machine noted).
+
+Benchmarks, not tests: nothing here asserts a time. Each figure is computed
+by the package that owns the code it measures; this module only collects.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+NAME = "bench"
+HELP = (
+    "measure plant, closed-loop, logging, analysis, shell and loop-pacing speed (JSON with --json)"
+)
+
+FIGURES = (
+    "plant_rtf",
+    "closed_loop_rtf",
+    "closed_loop_logged_rtf",
+    "analyze_msgs_per_s",
+    "baseline_msgs_per_s",
+    "shell_us_per_sample",
+    "loop_on_time_ratio",
+    "loop_jitter_us_p99",
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        choices=("plant", "closed_loop", "logging", "analysis", "shell", "loop"),
+        help="run only these groups (repeatable)",
+    )
+    p.add_argument("--quick", action="store_true", help="shorter runs (smoke check of the bench)")
+
+
+def machine() -> dict[str, Any]:
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
+
+
+def closed_loop_rtf(duration_s: float = 20.0, *, logged: bool = False) -> float:
+    """Both axes under ESO-SMC with the twin, in-process lockstep (safety supervisor on),
+    timed over the closed loop itself; ``logged`` adds writing the MCAP bag (closed included)."""
+    from pneu_msgs_py.params.paths import config_file
+
+    from pneu_control.experiment import session
+    from pneu_control.experiment.bag_log import open_run_bag
+    from pneu_control.experiment.runner import run
+
+    spec = session.build_spec(
+        axes=("linear", "rotary"),
+        controller="eso_smc",
+        sets=[
+            "linear.reference.kind=sine",
+            "linear.reference.amplitude=20.0",
+            "linear.reference.frequency_hz=0.25",
+            "rotary.reference.kind=constant",
+            "rotary.reference.value=800.0",
+        ],
+        duration_s=duration_s,
+        controllers_file=config_file("controllers_retuned.yaml"),  # gains that work on the twin
+        name="bench",
+    )
+    echo = session.config_echo(spec)
+    with tempfile.TemporaryDirectory(prefix="pneu-bench-") as tmp:
+        best = math.inf
+        for i in range(3):  # best of 3; the first pass also warms the JIT cache
+            t0 = time.perf_counter()
+            if logged:
+                with open_run_bag(Path(tmp) / f"run{i}.mcap", spec, echo) as bag:
+                    run(spec, bag=bag)
+            else:
+                run(spec)
+            best = min(best, time.perf_counter() - t0)
+    return duration_s / best
+
+
+def _groups(quick: bool) -> dict[str, Callable[[], dict[str, Any]]]:
+    d = 4.0 if quick else 20.0
+
+    def plant() -> dict[str, Any]:
+        from pneu_sim.bench.plant import plant_rtf
+
+        return {"plant_rtf": plant_rtf(duration_s=d)}
+
+    def closed_loop() -> dict[str, Any]:
+        return {"closed_loop_rtf": closed_loop_rtf(d)}
+
+    def logging() -> dict[str, Any]:
+        return {"closed_loop_logged_rtf": closed_loop_rtf(d, logged=True)}
+
+    def analysis() -> dict[str, Any]:
+        from pneu_msgs_py.bench import bag as bag_bench
+
+        minutes = 1.0 if quick else 10.0
+        return bag_bench.analysis_figures(minutes=minutes)
+
+    def shell() -> dict[str, Any]:
+        from pneu_control.nodes.controller_core import bench_shell_us_per_sample
+
+        return {"shell_us_per_sample": bench_shell_us_per_sample()}
+
+    def loop() -> dict[str, Any]:
+        from pneu_driver.bench.loop import loop_pacing
+
+        return loop_pacing(duration_s=2.0 if quick else 10.0)
+
+    return {
+        "plant": plant,
+        "closed_loop": closed_loop,
+        "logging": logging,
+        "analysis": analysis,
+        "shell": shell,
+        "loop": loop,
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    results: dict[str, Any] = {"machine": machine()}
+    groups = _groups(args.quick)
+    for name, fn in groups.items():
+        if args.only and name not in args.only:
+            continue
+        print(f"  bench {name} ...", file=sys.stderr)
+        try:
+            results.update(fn())
+        except ImportError as err:
+            results.setdefault("skipped", {})[name] = f"not available: {err}"
+    if args.json:
+        print(json.dumps(results, indent=2, sort_keys=True))
+    else:
+        for key in FIGURES:
+            if key in results:
+                print(f"{key:24s} {results[key]:.4g}")
+        for key, why in results.get("skipped", {}).items():
+            print(f"{key:24s} skipped ({why})")
+    return 0

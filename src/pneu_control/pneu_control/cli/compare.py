@@ -1,0 +1,57 @@
+"""``pneu compare``: one table and overlay plots across runs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from pneu_control.analysis.plots import plot_runs
+from pneu_control.analysis.run_analysis import analyze
+from pneu_control.cli.plot import series_of
+
+NAME = "compare"
+HELP = "compare runs: one metrics table (markdown + JSON) and a figure with a column per run"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("runs", nargs="+", metavar="RUN")
+    p.add_argument(
+        "--out", default=None, metavar="DIR", help="write compare.md, compare.json, compare.png"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    rows = []
+    series = []
+    for path in args.runs:
+        res = analyze(path)
+        for axis, m in res.metrics.items():
+            rows.append(
+                {
+                    "run": str(path),
+                    "axis": axis,
+                    "algorithm": res.traces[axis].algorithm,
+                    "e_max": m.e_max,
+                    "rmse": m.rmse,
+                    "unit": m.unit,
+                    "window_s": m.window_s,
+                }
+            )
+        series.extend(series_of(res, label_prefix=f"{Path(path).parent.name}/{Path(path).name}: "))
+    lines = ["| run | axis | algorithm | e_max | RMSE | window (s) |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(
+            f"| {r['run']} | {r['axis']} | {r['algorithm']} | {r['e_max']:.4f} {r['unit']} | "
+            f"{r['rmse']:.4f} {r['unit']} | {r['window_s'][0]:.2f}–{r['window_s'][1]:.2f} |"
+        )
+    table = "\n".join(lines) + "\n"
+    print(table)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "compare.md").write_text(table)
+        (out / "compare.json").write_text(json.dumps({"runs": rows}, indent=2) + "\n")
+        plot_runs(series, "pneu compare", out / "compare.png")
+        print(f"wrote {out}/compare.md, compare.json, compare.png")
+    return 0

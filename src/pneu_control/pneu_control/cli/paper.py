@@ -1,0 +1,146 @@
+"""``pneu paper``: every experiment of the paper on the twin, table and figures."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from pneu_msgs_py.params.paths import config_dir
+
+from pneu_control.analysis.plots import Series, plot_runs
+from pneu_control.experiment import paper, session
+from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, Experiment, experiment_by_id
+
+NAME = "paper"
+HELP = (
+    "reproduce the paper's experiments on the twin: results table beside the paper's, figures, bags"
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--seed", type=int, default=0, help="seed of the runs in the table (and bags)")
+    p.add_argument(
+        "--seeds",
+        type=int,
+        default=5,
+        metavar="N",
+        help="also run seeds seed+1..seed+N-1 (no bags) for mean/worst columns (1: off)",
+    )
+    p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
+    p.add_argument(
+        "--config-dir",
+        default=None,
+        metavar="DIR",
+        help="directory with controllers.yaml and controllers_retuned.yaml (default: config/)",
+    )
+    p.add_argument("--no-plots", action="store_true")
+    p.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        metavar="ID",
+        help="run only these experiments (repeatable): "
+        + ", ".join(e.id for e in PAPER_EXPERIMENTS),
+    )
+
+
+def _series(result, exp: Experiment, label: str, m) -> Series:
+    from pneu_control.experiment.runner import _MEASURED
+
+    cols = result.axes[exp.axis]
+    return Series(
+        label=label,
+        axis=exp.axis,
+        t=result.t,
+        reference=cols["reference"],
+        measured=result.samples[_MEASURED[exp.axis]],
+        u=cols["u"],
+        window_s=(m.window_start_s, m.window_end_s),
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from pneu_sim.physics.params import load_plant
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    plant = load_plant(args.plant)
+    results: dict[tuple[str, str], object] = {}
+
+    cfg = Path(args.config_dir) if args.config_dir else config_dir()
+
+    def runner(exp: Experiment, controller: str, gains: str, run_dir: Path):
+        spec = session.build_spec(
+            axes=(exp.axis,),
+            controller=controller,
+            reference=dict(exp.reference),
+            duration_s=exp.duration_s,
+            seed=args.seed,
+            controllers_file=cfg / paper.GAIN_SETS[gains],
+            plant=plant,
+            name=f"{exp.id}/{controller}/{gains}",
+        )
+        spec = _with_window(spec, exp)
+        result = session.execute(spec, run_dir, bag=True)
+        m = session.metrics_from_bag(run_dir / "run.mcap", exp.axis)
+        results[(exp.id, controller, gains)] = (result, m)
+        return result, m
+
+    def seed_runner(exp: Experiment, controller: str, gains: str, seed: int):
+        from pneu_control.experiment.runner import run as run_spec
+
+        spec = session.build_spec(
+            axes=(exp.axis,),
+            controller=controller,
+            reference=dict(exp.reference),
+            duration_s=exp.duration_s,
+            seed=seed,
+            controllers_file=cfg / paper.GAIN_SETS[gains],
+            plant=plant,
+        )
+        return run_spec(_with_window(spec, exp)).metrics[exp.axis]
+
+    if args.seeds < 1:
+        raise ValueError(f"--seeds: {args.seeds} refused; allowed: an integer >= 1")
+    t0 = time.perf_counter()
+    print(f"pneu paper: experiments of the paper on the twin (seed {args.seed})")
+    experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
+    rows = paper.run_paper(
+        out,
+        seed=args.seed,
+        runner=runner,
+        experiments=experiments,
+        seed_runner=seed_runner,
+        seeds=args.seeds,
+    )
+    paper.write_table(rows, out, extra={"seed": args.seed, "seeds": args.seeds})
+    if not args.no_plots:
+        for exp in experiments:
+            for gains in paper.PAPER_GAIN_SETS:
+                keys = [
+                    (exp.id, c, g)
+                    for c, g in paper.runs_for(exp)
+                    if (g == gains) or (gains == "retuned" and g == "design")
+                ]
+                series = [
+                    _series(results[k][0], exp, f"{k[1]} ({k[2]} gains)", results[k][1])
+                    for k in keys
+                ]
+                plot_runs(series, f"{exp.title}: {gains} gains", out / f"{exp.id}__{gains}.png")
+    print()
+    print(paper.render_markdown(rows))
+    print(
+        f"wrote {out}/paper_table.json, paper_table.md, figures and one bag per run "
+        f"in {time.perf_counter() - t0:.1f} s",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def _with_window(spec, exp: Experiment):
+    from dataclasses import replace
+
+    return replace(spec, windows={exp.axis: exp.window})

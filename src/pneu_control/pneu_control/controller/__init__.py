@@ -1,0 +1,1 @@
+"""One axis controller: parameters, references, TD + algorithm + limits + bumpless switching."""

@@ -1,0 +1,1 @@
+"""Experiments on the twin: the in-process runner, sessions, the paper's table, tuning, replay, faults."""

@@ -1,0 +1,349 @@
+"""The in-process experiment runner: twin and controller cores in lockstep.
+
+One control cycle (DESIGN §3, k = sample index, T = 1 ms):
+
+1. the plant is sampled at tick k → sample s_k;
+2. each active controller computes u_k from s_k;
+3. u_k is written at tick k+1 and held until k+2 (one-sample transport delay),
+   so the plant steps from k to k+1 under u_{k−1}.
+
+The ROS graph in lockstep mode does exactly the same, so both give the same
+numbers for the same config and seed. Inactive axes hold the neutral 5 V.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pneu_msgs_py.contract.samples import AXES, NEUTRAL_V, SensorSample
+from pneu_sim.physics.plant import Plant
+
+from pneu_control.analysis.metrics import AxisMetrics, WindowSpec, compute_metrics
+from pneu_control.controller.axis import STATE_FIELDS, AxisController
+
+__all__ = ["SAMPLE_FIELDS", "RunResult", "RunSpec", "run"]
+
+SAMPLE_FIELDS = ("p_c1", "p_c2", "p_m1", "x", "theta", "omega", "counts")
+_MEASURED = {"linear": "x", "rotary": "omega"}
+
+
+def _default_safety() -> Any:
+    from pneu_driver.safety.supervisor import SafetyParams
+
+    return SafetyParams()
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything that sets a run: with the same spec the results are byte-identical."""
+
+    axes: tuple[str, ...]
+    controllers: dict[str, Any]  # axis -> AxisControllerParams
+    plant: Any  # PlantParams
+    duration_s: float
+    seed: int = 0
+    windows: dict[str, WindowSpec] = field(default_factory=dict)
+    x0: float = 0.0
+    name: str = "run"
+    faults: tuple[Any, ...] = ()  # pneu_sim.faults.injection.FaultSpec
+    safety: Any = field(default_factory=_default_safety)  # SafetyParams; None = no supervisor
+    include_faults: bool = False  # metrics over the fault intervals too
+
+    def __post_init__(self):
+        for axis in self.axes:
+            if axis not in AXES:
+                raise ValueError(f"axis: {axis!r} refused; allowed: one of {AXES}")
+            if axis not in self.controllers:
+                raise ValueError(f"controllers: no controller parameters for axis {axis!r}")
+        if not (self.duration_s > 0.0 and math.isfinite(self.duration_s)):
+            raise ValueError(f"duration: {self.duration_s!r} refused; allowed: (0, inf) s")
+
+
+@dataclass
+class RunResult:
+    """Time series and metrics of one run (SI arrays, metrics in report units)."""
+
+    spec: RunSpec
+    t: np.ndarray  # (N,) s, sample times
+    samples: dict[str, np.ndarray]  # SAMPLE_FIELDS -> (N,)
+    axes: dict[str, dict[str, np.ndarray]]  # axis -> STATE_FIELDS + "u" -> (N,)
+    algorithms: dict[str, str]
+    metrics: dict[str, AxisMetrics]
+    wall_s: float
+    interrupted: bool = False
+    applied: dict[str, np.ndarray] = field(default_factory=dict)  # axis -> V held during each step
+    truth: dict[str, np.ndarray] = field(default_factory=dict)  # x, omega (true; runs with faults)
+    safety_events: list[Any] = field(default_factory=list)  # SafetyEvent, in order
+    fault_intervals: list[Any] = field(default_factory=list)  # fault_marks.FaultInterval
+    safety_counters: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def rtf(self) -> float:
+        """Simulated seconds per wall-clock second."""
+        return (
+            float(self.t[-1] + self.t[1] - self.t[0]) / self.wall_s if self.wall_s > 0 else math.inf
+        )
+
+    def metrics_dict(self) -> dict[str, Any]:
+        return {axis: m.to_dict() for axis, m in self.metrics.items()}
+
+    def save(self, out_dir: str | Path, config_echo: dict[str, Any] | None = None) -> Path:
+        """Write ``metrics.json`` and ``timeseries.npz`` into ``out_dir``."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        doc = {
+            "name": self.spec.name,
+            "axes": list(self.spec.axes),
+            "algorithms": self.algorithms,
+            "duration_s": self.spec.duration_s,
+            "seed": self.spec.seed,
+            "interrupted": self.interrupted,
+            "metrics": self.metrics_dict(),
+            "units": {"linear": "mm", "rotary": "rpm"},
+            "config": config_echo or {},
+            "fault_intervals": [iv.to_dict() for iv in self.fault_intervals],
+            "safety_counters": self.safety_counters,
+        }
+        (out / "metrics.json").write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
+        arrays = {"t": self.t}
+        arrays.update({f"sample.{k}": v for k, v in self.samples.items()})
+        for axis, cols in self.axes.items():
+            arrays.update({f"{axis}.{k}": v for k, v in cols.items()})
+        with open(out / "timeseries.npz", "wb") as fh:
+            np.savez(fh, **arrays)
+        return out
+
+
+RUNNER_NODE = "pneu_runner"  # the node name in /diagnostics status names
+
+
+def _diag(events: list[Any]) -> list[Any]:
+    from pneu_msgs_py.bag import DiagStatus
+
+    from pneu_control.analysis.fault_marks import diag_name
+
+    level = {"OK": 0, "WARN": 1, "ERROR": 2}
+    return [
+        DiagStatus(
+            level[e.level],
+            diag_name(RUNNER_NODE, e.axis, e.rule),
+            e.message,
+            "twin",
+            dict(e.values),
+        )
+        for e in events
+    ]
+
+
+def run(
+    spec: RunSpec,
+    *,
+    bag: Any | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> RunResult:
+    """Run ``spec`` in lockstep. ``bag``: an open ``BagWriter`` to log into.
+
+    With ``spec.safety`` (the default) every command passes through a
+    :class:`pneu_driver.safety.supervisor.SafetySupervisor` before it reaches the plant,
+    and every sample (with the raw AI volts the twin's sensors put out) is
+    checked; transitions go to ``/diagnostics`` in the bag. ``spec.faults``
+    are injected by a :class:`pneu_sim.faults.injection.FaultInjector`.
+
+    Per cycle k: sample s_k (faults applied) → supervisor checks s_k →
+    output for tick k (= u_{k−1} after the rules) → controllers answer s_k with
+    u_k → plant steps k → k+1 under the tick-k output. No exception from a
+    controller escapes: the controller is treated as crashed (silent) from
+    then on and the supervisor's watchdog takes its axis safe.
+
+    A KeyboardInterrupt stops the loop cleanly: the result holds what ran
+    (``interrupted=True``) and the caller still closes the bag.
+    """
+    plant = Plant(spec.plant, seed=spec.seed)
+    period = plant.T
+    n = int(round(spec.duration_s / period))
+    ctrls = {axis: AxisController(axis, spec.controllers[axis]) for axis in spec.axes}
+    rec_samples: list[SensorSample] = []
+    rec_state: dict[str, list[tuple[float, ...]]] = {axis: [] for axis in ctrls}
+    rec_u: dict[str, list[float]] = {axis: [] for axis in ctrls}
+    # (index into the (linear, rotary) command pair, axis, core, its records), fixed order
+    active = [
+        (AXES.index(axis), axis, ctrls[axis], rec_state[axis], rec_u[axis])
+        for axis in AXES
+        if axis in ctrls
+    ]
+    rec_out: list[tuple[float, float]] = []  # what the DAQ held during each step
+    rec_truth: list[tuple[float, float]] = []  # (x, omega) true, only with faults
+    algorithms = {axis: c.params.algorithm for axis, c in ctrls.items()}
+    nan_state = (math.nan,) * len(STATE_FIELDS)
+
+    sup = None
+    volts_of = None
+    if spec.safety is not None:
+        from pneu_driver.safety.supervisor import SafetySupervisor
+
+        sup = SafetySupervisor(spec.safety, sample_time_s=period)
+    inj = None
+    if spec.faults:
+        from pneu_sim.faults.injection import FaultInjector
+
+        inj = FaultInjector(spec.faults, plant, seed=spec.seed, active_axes=spec.axes)
+    elif sup is not None:
+        from pneu_sim.faults.injection import SensorScaling
+
+        volts_of = SensorScaling(spec.plant).volts
+    events_all: list[Any] = []
+    crashed: dict[str, str] = {}
+
+    def controller_failed(axis: str, err: BaseException, stamp: int) -> None:
+        crashed[axis] = f"{type(err).__name__}: {err}"
+        from pneu_driver.safety.supervisor import ERROR, SafetyEvent
+
+        ev = SafetyEvent(
+            stamp,
+            axis,
+            "controller_exception",
+            ERROR,
+            f"{axis} controller raised {crashed[axis]}; treated as crashed (no more commands)",
+            (("exception", type(err).__name__),),
+        )
+        events_all.append(ev)
+        if bag is not None:
+            bag.write_diagnostics(stamp, _diag([ev]))
+
+    s = plant.reset(x0=spec.x0)
+    u_hold_l = u_hold_r = NEUTRAL_V  # what the DAQ holds during the coming period
+    interrupted = False
+    report_every = max(1, int(round(1.0 / period)))  # once per simulated second
+    t_wall = time.perf_counter()
+    k = 0
+    try:
+        for k in range(n):
+            stamp = s.stamp_ns
+            if inj is not None:
+                s, volts = inj.sample(k, s)
+                st = plant.state
+                rec_truth.append((st.x, st.omega))
+            elif sup is not None:
+                volts = volts_of(s)
+            if sup is not None:
+                sup.check_sample(s, volts)
+                u_hold_l, u_hold_r = sup.outputs(stamp)  # u_{k-1} after the rules, tick k
+            rec_samples.append(s)
+            answers = []  # (axis, u, state values, algorithm) for the bag, in axis order
+            u_new = [NEUTRAL_V, NEUTRAL_V]  # an inactive axis holds the neutral command
+            for i, axis, ctrl, rec_st, rec_u_ in active:
+                u = None
+                if not ((inj is not None and inj.silent(k, axis)) or axis in crashed):
+                    try:
+                        u = ctrl.update(s)
+                    except Exception as err:  # a crashed controller must not stop the rig
+                        controller_failed(axis, err, stamp)
+                if u is None:  # silent or crashed: no command this cycle
+                    rec_st.append(nan_state)
+                    rec_u_.append(math.nan)
+                else:
+                    values = ctrl.state_values()
+                    if inj is not None:
+                        u = inj.command(k, axis, u)
+                    rec_st.append(values)
+                    rec_u_.append(u)
+                    if bag is not None:
+                        answers.append((axis, u, values, ctrl.algorithm))
+                    if sup is not None:
+                        sup.command(axis, u, stamp)
+                u_new[i] = u
+            if bag is not None:
+                bag.write_cycle(s, answers)
+            if sup is not None:
+                events = sup.events()
+                if events:
+                    events_all.extend(events)
+                    if bag is not None:
+                        bag.write_diagnostics(stamp, _diag(events))
+            rec_out.append((u_hold_l, u_hold_r))
+            if inj is not None:
+                s = plant.step(*inj.valves(k, u_hold_l, u_hold_r))
+            else:
+                s = plant.step(u_hold_l, u_hold_r)  # tick k -> k+1 under u_{k-1}
+            if sup is None:  # no supervisor: the DAQ holds the last value it could write
+                u_l, u_r = u_new
+                if u_l is not None and math.isfinite(u_l):
+                    u_hold_l = u_l
+                if u_r is not None and math.isfinite(u_r):
+                    u_hold_r = u_r
+            if progress is not None and k % report_every == 0:
+                progress(k * period)
+    except KeyboardInterrupt:
+        interrupted = True
+    wall = time.perf_counter() - t_wall
+
+    m = len(rec_samples)
+    t = np.array([rs.stamp_ns for rs in rec_samples], dtype=np.int64) * 1e-9
+    samples = {
+        name: np.array([getattr(rs, name) for rs in rec_samples], dtype=float)
+        for name in SAMPLE_FIELDS
+    }
+    faults = fault_intervals_of(spec, events_all, period)
+    axes: dict[str, dict[str, np.ndarray]] = {}
+    metrics: dict[str, AxisMetrics] = {}
+    for axis in ctrls:
+        block = np.array(rec_state[axis][:m], dtype=float).reshape(m, len(STATE_FIELDS))
+        cols = {name: block[:, i] for i, name in enumerate(STATE_FIELDS)}
+        cols["u"] = np.array(rec_u[axis][:m], dtype=float)
+        axes[axis] = cols
+        window = spec.windows.get(axis, WindowSpec(kind="fixed"))
+        measured = samples[_MEASURED[axis]]
+        if m > 1:
+            metrics[axis] = axis_metrics(
+                axis, t, cols["reference"], measured, window, faults, spec.include_faults
+            )
+    out = np.array(rec_out[:m], dtype=float).reshape(m, 2)
+    applied = {"linear": out[:, 0], "rotary": out[:, 1]}
+    truth = {}
+    if rec_truth:
+        tr = np.array(rec_truth[:m], dtype=float).reshape(-1, 2)
+        truth = {"x": tr[:, 0], "omega": tr[:, 1]}
+    return RunResult(
+        spec,
+        t,
+        samples,
+        axes,
+        algorithms,
+        metrics,
+        wall,
+        interrupted,
+        applied=applied,
+        truth=truth,
+        safety_events=events_all,
+        fault_intervals=faults,
+        safety_counters=dict(sup.counters) if sup is not None else {},
+    )
+
+
+def fault_intervals_of(spec: RunSpec, events: list[Any], period_s: float) -> list[Any]:
+    """Injected-fault and safe intervals of a run (see :mod:`pneu_control.analysis.fault_marks`)."""
+    from pneu_control.analysis.fault_marks import injected_intervals, safe_intervals
+
+    out = injected_intervals([f.to_dict() for f in spec.faults], spec.axes, period_s)
+    out += safe_intervals((e.stamp_ns, e.axis, e.rule, e.level, e.message) for e in events)
+    return out
+
+
+def axis_metrics(axis, t, reference, measured, window, intervals, include_faults=False):
+    """DESIGN §7 metrics without the fault intervals (unless ``include_faults``) and non-finite samples."""
+    from pneu_control.analysis.fault_marks import exclusion_mask
+
+    bad = ~(np.isfinite(measured) & np.isfinite(reference))
+    exclude = bad if bad.any() else None
+    if not include_faults and intervals:
+        fm = exclusion_mask(t, intervals, axis)
+        if fm is not None:
+            exclude = fm if exclude is None else (exclude | fm)
+    return compute_metrics(axis, t, reference, measured, window, exclude=exclude)

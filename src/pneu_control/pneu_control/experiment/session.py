@@ -1,0 +1,255 @@
+"""Build a :class:`RunSpec` from user-level options and execute it with logging.
+
+Shared by ``pneu run``, ``pneu paper`` and the benchmarks so that every entry
+point resolves config files, overrides and steady-state windows the same way.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+import time
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pneu_msgs_py.params.core import ParamError, to_dict
+
+from pneu_control.analysis.metrics import WindowSpec
+from pneu_control.controller.params import load_controller_params
+from pneu_control.experiment.runner import RunResult, RunSpec, run
+
+__all__ = ["build_spec", "execute", "parse_reference", "parse_sets", "window_for"]
+
+
+def parse_value(text: str) -> Any:
+    """A CLI value as YAML would read it (``1`` int, ``1.0`` float, ``pid`` str).
+
+    YAML 1.1 reads ``3e5`` as a string; a user means the number.
+    """
+    value = yaml.safe_load(text)
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
+def parse_sets(items: Iterable[str], axes: tuple[str, ...]) -> dict[str, dict[str, Any]]:
+    """``["eso_smc.epsilon=900", "rotary.pid.kp=0.3"]`` -> per-axis dotted overrides."""
+    out: dict[str, dict[str, Any]] = {axis: {} for axis in axes}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--set: {item!r} refused; allowed: KEY=VALUE")
+        head, _, rest = key.partition(".")
+        targets = axes
+        if head in ("linear", "rotary"):
+            if head not in axes:
+                raise ValueError(
+                    f"--set {key}: axis {head!r} is not active (active: {', '.join(axes)})"
+                )
+            targets, key = (head,), rest
+        for axis in targets:
+            out[axis][key] = parse_value(value)
+    return out
+
+
+def parse_reference(text: str | None) -> dict[str, Any]:
+    """``sine:amplitude=20,frequency_hz=0.25`` -> dotted ``reference.*`` overrides."""
+    if not text:
+        return {}
+    kind, _, rest = text.partition(":")
+    out: dict[str, Any] = {"reference.kind": kind.strip()}
+    for part in filter(None, (p.strip() for p in rest.split(","))):
+        key, sep, value = part.partition("=")
+        if not sep:
+            raise ValueError(f"--reference: {part!r} refused; allowed: key=value")
+        out[f"reference.{key.strip()}"] = parse_value(value)
+    return out
+
+
+def rotary_average_s(speed_rpm: float) -> float:
+    """Speed-metric averaging window: one revolution at the reference (pneu_control.analysis.metrics)."""
+    return 60.0 / abs(speed_rpm) if speed_rpm else 0.0
+
+
+def window_for(axis: str, reference: Any, window_start_s: float | None = None) -> WindowSpec:
+    """DESIGN §7 default steady-state window for a reference kind."""
+    if window_start_s is not None:
+        return WindowSpec(kind="fixed", t_start_s=window_start_s)
+    kind = reference.kind
+    if kind == "sine":
+        return WindowSpec(kind="sine", frequency_hz=reference.frequency_hz)
+    if kind == "constant" and axis == "rotary":
+        return WindowSpec(kind="speed", average_s=rotary_average_s(reference.value))
+    if kind == "smooth_step":
+        return WindowSpec(kind="positioning", t_start_s=reference.duration_s + 1.0)
+    return WindowSpec(kind="fixed", t_start_s=1.0)
+
+
+def build_spec(
+    *,
+    axes: tuple[str, ...],
+    controller: str | None = None,
+    reference: str | dict[str, Any] | None = None,
+    sets: Iterable[str] = (),
+    duration_s: float = 20.0,
+    seed: int = 0,
+    plant_file: str | Path | None = None,
+    controllers_file: str | Path | None = None,
+    window_start_s: float | None = None,
+    faults: Iterable[Any] = (),
+    name: str = "run",
+    plant: Any | None = None,
+    safety: bool | Any = True,
+    safety_file: str | Path | None = None,
+    include_faults: bool = False,
+) -> RunSpec:
+    """A validated :class:`RunSpec` from user-level options (nothing half-applied).
+
+    ``faults``: ``NAME[:k=v,...]`` strings, dicts or :class:`pneu_sim.faults.injection.FaultSpec`.
+    ``safety``: True (default) = the supervisor with ``safety_file`` (default
+    ``config/safety.yaml``); False = no supervisor; or a ``SafetyParams``.
+    """
+    from pneu_sim.faults.injection import parse_faults
+    from pneu_sim.physics.params import load_plant
+
+    plant_params = plant if plant is not None else load_plant(plant_file)
+    per_axis = parse_sets(sets, axes)
+    ref = reference if isinstance(reference, dict) else parse_reference(reference)
+    controllers: dict[str, Any] = {}
+    windows: dict[str, WindowSpec] = {}
+    for axis in axes:
+        overrides: dict[str, Any] = dict(ref)
+        if controller:
+            overrides["algorithm"] = controller
+        overrides.update(per_axis[axis])
+        try:
+            params = load_controller_params(axis, controllers_file, overrides)
+        except ParamError as err:
+            raise ParamError(f"{axis}.{err.key}", err.value, err.allowed) from None
+        controllers[axis] = params
+        windows[axis] = window_for(axis, params.reference, window_start_s)
+    fault_specs = parse_faults(faults)
+    if safety is True:
+        from pneu_driver.safety.supervisor import load_safety_params
+
+        safety_params = load_safety_params(safety_file)
+    elif safety is False or safety is None:
+        safety_params = None
+    else:
+        safety_params = safety
+    return RunSpec(
+        axes=axes,
+        controllers=controllers,
+        plant=plant_params,
+        duration_s=duration_s,
+        seed=seed,
+        windows=windows,
+        name=name,
+        faults=fault_specs,
+        safety=safety_params,
+        include_faults=include_faults,
+    )
+
+
+def config_echo(spec: RunSpec) -> dict[str, Any]:
+    """The full config of a run, as plain data (metrics.json, bag metadata)."""
+    from pneu_msgs_py import __version__
+
+    return {
+        "name": spec.name,
+        "axes": list(spec.axes),
+        "duration_s": spec.duration_s,
+        "seed": spec.seed,
+        "x0": spec.x0,
+        "controllers": {axis: to_dict(p) for axis, p in spec.controllers.items()},
+        "windows": {axis: w.to_dict() for axis, w in spec.windows.items()},
+        "plant": to_dict(spec.plant),
+        "faults": [f.to_dict() for f in spec.faults],
+        "safety": None if spec.safety is None else to_dict(spec.safety),
+        "version": __version__,
+    }
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM behaves like Ctrl-C so the bag is finalised either way."""
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    try:
+        old = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def _progress_printer(total_s: float, label: str):
+    start = time.monotonic()
+    last = [start]
+
+    def report(t_sim: float) -> None:
+        now = time.monotonic()
+        if now - last[0] >= 1.0 and now - start >= 2.0:
+            last[0] = now
+            print(f"  {label}: {t_sim:5.1f} / {total_s:.1f} s simulated", file=sys.stderr)
+
+    return report
+
+
+def execute(
+    spec: RunSpec,
+    out_dir: str | Path,
+    *,
+    bag: bool = True,
+    progress: bool = False,
+    bag_name: str = "run.mcap",
+) -> RunResult:
+    """Run ``spec``, write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    echo = config_echo(spec)
+    report = _progress_printer(spec.duration_s, spec.name) if progress else None
+    with _sigterm_as_interrupt():
+        if bag:
+            from pneu_control.experiment.bag_log import (
+                INTERVALS_METADATA,
+                intervals_metadata,
+                open_run_bag,
+            )
+
+            with open_run_bag(out / bag_name, spec, echo) as writer:
+                result = run(spec, bag=writer, progress=report)
+                writer.add_metadata(
+                    INTERVALS_METADATA,
+                    intervals_metadata(result.fault_intervals, result.safety_counters),
+                )
+        else:
+            result = run(spec, progress=report)
+    result.save(out, config_echo=echo)
+    for iv in result.fault_intervals:
+        if iv.kind == "safe":
+            until = "the end" if iv.end_s == float("inf") else f"{iv.end_s:.3f} s"
+            print(
+                f"  {spec.name}: safety: {iv.axis} valve held safe from {iv.start_s:.3f} s to "
+                f"{until} ({iv.cause})",
+                file=sys.stderr,
+            )
+    return result
+
+
+def metrics_from_bag(path: str | Path, axis: str):
+    """The metrics of ``axis`` computed from the bag alone (the analysis path)."""
+    from pneu_control.analysis.run_analysis import analyze
+
+    return analyze(path).metrics[axis]

@@ -1,0 +1,220 @@
+"""``linear_controller`` / ``rotary_controller``: an AxisController as an rclpy node.
+
+Event-driven: the five sensor topics feed :class:`~pneu_control.nodes.controller_core.ControllerShellCore`,
+which computes when a tick is complete; the command (stamped with the
+sample it answers) and the controller state are published from that
+callback -- no timer in the loop. Every field of :class:`AxisControllerParams`
+is a parameter with a descriptor (description, range, read-only); defaults
+come from ``controllers_file`` (config/controllers.yaml), ROS overrides win.
+A change is validated as one set before rclpy stores it (on-set callback),
+applied after (post-set), and takes effect at the next sample, bumplessly.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from pneu_msgs_py.contract.convert import fill_diagnostic_array, fill_valve_command
+from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
+from pneu_msgs_py.contract.topics import (
+    CONTROLLER_STATE_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    VALVE_COMMAND_TOPIC,
+    qos_for,
+)
+from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.ros import coerce_value, declarations, specs_by_name, validate_updates
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy import qos as rq
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import FluidPressure, JointState
+
+from pneu_control.controller.axis import AxisController
+from pneu_control.controller.params import load_controller_params
+from pneu_control.nodes.controller_core import SENSOR_TOPICS, ControllerShellCore
+
+
+class ControllerNode(Node):
+    def __init__(self, axis: str, **node_kwargs):
+        super().__init__(f"{axis}_controller", **node_kwargs)
+        self.axis = axis
+        ro = {"read_only": True}
+        self.declare_parameter(
+            "controllers_file",
+            "",
+            ParameterDescriptor(
+                description="controllers YAML giving the defaults ('' = installed config/controllers.yaml)",
+                **ro,
+            ),
+        )
+        self.declare_parameter(
+            "mode",
+            "realtime",
+            ParameterDescriptor(
+                description="QoS set: realtime (best-effort sensors) or lockstep (reliable, nothing lost)",
+                additional_constraints="one of lockstep, realtime",
+                **ro,
+            ),
+        )
+        mode = self.get_parameter("mode").value
+        if mode not in ("lockstep", "realtime"):
+            raise ParamError("mode", mode, "one of lockstep, realtime")
+        base = load_controller_params(axis, self.get_parameter("controllers_file").value or None)
+        decls = declarations(base, ParameterDescriptor, FloatingPointRange, IntegerRange)
+        self.declare_parameters("", decls)
+        ok, reason, params = validate_updates(
+            base, [(n, self.get_parameter(n).value) for n, _, _ in decls], startup=True
+        )
+        if not ok:
+            raise ValueError(reason)
+        self.specs = specs_by_name(params)
+        self.params = params  # the newest accepted set
+        self.core = ControllerShellCore(axis, params)
+        self.add_pre_set_parameters_callback(self._coerce)
+        self.add_on_set_parameters_callback(self._validate)
+        self.add_post_set_parameters_callback(self._apply)
+
+        self.cmd_msg, self.state_msg = JointState(), JointState()
+        self.cmd_pub = self.create_publisher(
+            JointState,
+            VALVE_COMMAND_TOPIC[axis],
+            to_rclpy(qos_for(VALVE_COMMAND_TOPIC[axis], mode), rq),
+        )
+        self.state_pub = self.create_publisher(
+            JointState,
+            CONTROLLER_STATE_TOPIC[axis],
+            to_rclpy(qos_for(CONTROLLER_STATE_TOPIC[axis], mode), rq),
+        )
+        self.diag_pub = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
+        )
+        for topic in SENSOR_TOPICS:
+            msg_type = FluidPressure if "pressure" in topic else JointState
+            self.create_subscription(
+                msg_type,
+                topic,
+                lambda msg, t=topic: self._on_sensor(t, msg),
+                to_rclpy(qos_for(topic, mode), rq),
+            )
+        # diagnostics at 1 Hz of wall time (steady clock): works whether /clock runs or not,
+        # and with executors whose timers do not follow sim time; stamps use the node clock
+        self.create_timer(
+            1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME)
+        )
+        self.get_logger().info(f"{axis} controller ({params.algorithm}), {mode} QoS")
+
+    # -- per sample: everything in the core ---------------------------------
+    def _on_sensor(self, topic: str, msg) -> None:
+        if self.core.step(topic, msg, self.cmd_msg, self.state_msg):
+            self.cmd_pub.publish(self.cmd_msg)
+            self.state_pub.publish(self.state_msg)
+
+    # -- parameters ----------------------------------------------------------
+    def _coerce(self, params: list[Parameter]) -> list[Parameter]:
+        """``ros2 param set ... 900`` sends INTEGER to a DOUBLE parameter: make it 900.0."""
+        out = []
+        for p in params:
+            spec = self.specs.get(p.name)
+            value = coerce_value(spec, p.value) if spec is not None else p.value
+            out.append(p if value is p.value else Parameter(p.name, value=value))
+        return out
+
+    def _validate(self, params: list[Parameter]) -> SetParametersResult:
+        ok, reason, new = validate_updates(self.params, [(p.name, p.value) for p in params])
+        if ok and new is not self.params:
+            try:  # the core's own checks (reference and waypoint file, axis rules)
+                AxisController(self.axis, new)
+            except (ParamError, OSError) as err:
+                ok, reason = False, str(err)
+        if not ok:
+            self.get_logger().warning(f"parameter change refused: {reason}")
+        return SetParametersResult(successful=ok, reason=reason)
+
+    def _apply(self, params: list[Parameter]) -> None:
+        ok, _, new = validate_updates(self.params, [(p.name, p.value) for p in params])
+        if ok and new is not self.params:
+            self.params = new
+            self.core.set_params(new)  # takes effect at the next sample
+
+    # -- reports and shutdown ----------------------------------------------
+    def _publish_diagnostics(self) -> None:
+        statuses = self.core.diagnostics(self.get_name())
+        now = self.get_clock().now().nanoseconds
+        self.diag_pub.publish(
+            fill_diagnostic_array(DiagnosticArray(), DiagnosticStatus, KeyValue, now, statuses)
+        )
+
+    def publish_neutral(self) -> None:
+        """Last word: the neutral command for the last answered sample (driver writes 5 V now)."""
+        if self.core.last_stamp_ns >= 0:
+            u0 = self.params.limits.u_neutral
+            self.cmd_pub.publish(
+                fill_valve_command(JointState(), self.axis, self.core.last_stamp_ns, u0)
+            )
+
+
+def make_executor():
+    """rclpy's EventsExecutor where this rclpy has it (Jazzy >= 7.1.4), else SingleThreadedExecutor."""
+    try:
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    except ImportError:
+        from rclpy.executors import SingleThreadedExecutor
+
+        return SingleThreadedExecutor()
+
+
+def _main(axis: str, args=None) -> int:
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = ControllerNode(axis)
+        executor = make_executor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, ParameterException, OSError) as err:
+        print(f"{axis}_controller: error: {err}", file=sys.stderr)
+        code = 1
+    finally:
+        # Ctrl-C reaches a launched node twice (the terminal's process group, then
+        # launch's forward): the second SIGINT must not cut the cleanup short.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            if node is not None:
+                try:
+                    node.publish_neutral()
+                except Exception:  # context already shut down by the signal: the watchdog acts
+                    pass
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
+    return code
+
+
+def main_linear(args=None) -> int:
+    return _main("linear", args)
+
+
+def main_rotary(args=None) -> int:
+    return _main("rotary", args)
+
+
+if __name__ == "__main__":
+    sys.exit(main_linear())

@@ -1,0 +1,1 @@
+"""Benchmarks of the driver loop (timed by ``pneu bench``, never by tests)."""

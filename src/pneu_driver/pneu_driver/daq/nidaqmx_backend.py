@@ -1,0 +1,317 @@
+"""The real rig through nidaqmx (NI PCI-6221): three tasks, HW-timed single point at 1 kHz.
+
+Call sequence (``open``):
+
+1. ``nidaqmx.system.System.local().devices.device_names`` -- the device must
+   be visible (``DaqNotFoundError``, raised when the NI driver is missing, is
+   not a ``DaqError``: both become :class:`~pneu_driver.daq.errors.DaqUnavailableError`,
+   which names the device and lists the visible ones).
+2. Valves safe first: a throw-away on-demand AO task writes 5 V to both valves
+   (``Task.write([5.0, 5.0], auto_start=True)``) and is closed; the AO keeps the value.
+3. AI task: four ``ai_channels.add_ai_voltage_chan(phys, name, terminal_config,
+   min_val, max_val)``; hardware timing: ``timing.cfg_samp_clk_timing(rate,
+   sample_mode=HW_TIMED_SINGLE_POINT)`` on the onboard clock (the master).
+4. CI task: ``ci_channels.add_ci_ang_encoder_chan(counter, "encoder",
+   decoding_type=X_4, zidx_enable=False, units=AngleUnits.TICKS,
+   pulses_per_rev=ppr, initial_angle=0.0)``; on the sample clock: programmed
+   I/O (``ci_data_xfer_mech = POLLED``, else DAQmx -200842) and
+   ``cfg_samp_clk_timing(rate, source="/Dev1/ai/SampleClock", sample_mode=HW_TIMED_SINGLE_POINT)``.
+5. AO task: two ``ao_channels.add_ao_voltage_chan(phys, name, min_val=0, max_val=10)``;
+   on the sample clock: ``cfg_samp_clk_timing(rate, source="/Dev1/ai/SampleClock", ...)``,
+   so a value written after reading sample k is emitted at clock k+1. The safe
+   value is written once more before the task starts (if DAQmx refuses a write
+   to an unstarted HW-timed single-point task, that is logged and ignored: the
+   on-demand value of step 2 holds).
+6. Start CI and AO (slaves), then AI (its clock starts them all).
+
+Per cycle: ``AnalogMultiChannelReader.read_one_sample(buf, timeout)`` (blocks
+until the next sample clock in HW-timed single point), ``CounterReader.read_one_sample_double(timeout)``,
+and ``AnalogMultiChannelWriter.write_one_sample(buf, timeout)``. DAQmx -209800
+(read not done before the next clock), -209801 (write not done before the next
+clock) and -209802 (missed clocks) become :class:`~pneu_driver.daq.errors.LateCycleError`
+(counted, not fatal); any other DAQmx error is fatal.
+
+``close``: stop AI (the clock) then the others, close all, then the on-demand
+safe write again, so the valves end at 5 V even if the timed AO never emitted
+its last value.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+
+from pneu_driver.daq.errors import DaqIoError, DaqSetupError, DaqUnavailableError, LateCycleError
+from pneu_driver.daq.rig import AI_SENSORS, RigParams
+from pneu_driver.daq.scaling import RawSample, ao_volts, unwrap_counts
+
+__all__ = ["NidaqmxBackend", "LATE_CODES", "visible_devices"]
+
+log = logging.getLogger("pneu_driver.nidaqmx")
+
+# DAQmx status codes of a HW-timed single-point loop that missed its clock
+LATE_CODES = frozenset({-209800, -209801, -209802})
+
+
+def _import_nidaqmx(device: str) -> Any:
+    try:
+        import nidaqmx
+        import nidaqmx.constants
+        import nidaqmx.errors
+        import nidaqmx.stream_readers
+        import nidaqmx.stream_writers
+        import nidaqmx.system
+    except ImportError as err:
+        raise DaqUnavailableError(
+            device,
+            (),
+            f"the nidaqmx Python package is not installed ({err}); cannot open DAQ device {device!r}",
+        ) from err
+    return nidaqmx
+
+
+def visible_devices(device: str = "Dev1") -> list[str]:
+    """Names of the DAQmx devices this machine sees; raises DaqUnavailableError without the NI driver."""
+    nidaqmx = _import_nidaqmx(device)
+    try:
+        return list(nidaqmx.system.System.local().devices.device_names)
+    except nidaqmx.errors.DaqNotFoundError as err:
+        raise DaqUnavailableError(
+            device, (), f"NI-DAQmx driver not found ({err}); cannot open DAQ device {device!r}"
+        ) from err
+    except nidaqmx.errors.DaqError as err:
+        raise DaqUnavailableError(
+            device,
+            (),
+            f"NI-DAQmx cannot list devices (status {err.error_code}); cannot open DAQ device {device!r}",
+        ) from err
+
+
+class NidaqmxBackend:
+    """The rig: AI ×4 (pressures, laser), CI angular encoder (X4), AO ×2 (valves).
+
+    ``rig.loop.timing == "hardware"``: HW-timed single point at ``rate_hz``, the
+    AI read paces the loop (``hardware_paced``); ``"software"``: every task on
+    demand, the loop paces itself. Not thread-safe: one loop thread only.
+    """
+
+    def __init__(self, rig: RigParams):
+        self.rig = rig
+        lp = rig.loop
+        self.hardware_paced = lp.timing == "hardware"
+        self._ci_clocked = self.hardware_paced and lp.ci_timing == "sample_clock"
+        self._ao_clocked = self.hardware_paced and lp.ao_timing == "sample_clock"
+        self._timeout = lp.read_timeout_s
+        self._nidaqmx: Any = None
+        self._tasks: list[Any] = []
+        self._ai_reader: Any = None
+        self._ci_reader: Any = None
+        self._writer: Any = None
+        self._ai_buf = np.zeros(len(AI_SENSORS), dtype=np.float64)
+        self._ao_buf = np.zeros(2, dtype=np.float64)
+        self._counts = 0
+        self.is_open = False
+
+    def _phys(self, channel: str) -> str:
+        return f"{self.rig.device}/{channel}"
+
+    # -------------------------------------------------------------- lifecycle
+    def open(self) -> None:
+        """Check the device, write the safe value, create and start the three tasks."""
+        rig = self.rig
+        dev = rig.device
+        nidaqmx = _import_nidaqmx(dev)
+        self._nidaqmx = nidaqmx
+        names = visible_devices(dev)
+        if dev not in names:
+            raise DaqUnavailableError(dev, names)
+        c = nidaqmx.constants
+        hwtsp = c.AcquisitionType.HW_TIMED_SINGLE_POINT
+        clock = f"/{dev}/ai/SampleClock"
+        step = "writing the safe value"
+        try:
+            self._write_safe_on_demand()
+            step = "creating the AI task"
+            ai = self._new_task()
+            terminal = c.TerminalConfiguration[rig.ai.terminal_config]
+            for name in AI_SENSORS:
+                ai.ai_channels.add_ai_voltage_chan(
+                    self._phys(getattr(rig.channels, name)),
+                    name,
+                    terminal_config=terminal,
+                    min_val=rig.ai.min_v,
+                    max_val=rig.ai.max_v,
+                )
+            if self.hardware_paced:
+                ai.timing.cfg_samp_clk_timing(rig.loop.rate_hz, source="", sample_mode=hwtsp)
+            step = "creating the encoder (CI) task"
+            ci = self._new_task()
+            chan = ci.ci_channels.add_ci_ang_encoder_chan(
+                self._phys(rig.channels.encoder),
+                "encoder",
+                decoding_type=c.EncoderType["X_" + rig.encoder.decoding[1:]],
+                zidx_enable=False,
+                units=c.AngleUnits.TICKS,
+                pulses_per_rev=rig.encoder.ppr,
+                initial_angle=0.0,
+            )
+            if self._ci_clocked:
+                chan.ci_data_xfer_mech = (
+                    c.DataTransferActiveTransferMode.POLLED
+                )  # HWTSP counters need programmed I/O
+                ci.timing.cfg_samp_clk_timing(rig.loop.rate_hz, source=clock, sample_mode=hwtsp)
+            step = "creating the valve (AO) task"
+            ao = self._new_task()
+            for name, channel in (
+                ("valve_linear", rig.channels.valve_linear),
+                ("valve_rotary", rig.channels.valve_rotary),
+            ):
+                ao.ao_channels.add_ao_voltage_chan(
+                    self._phys(channel), name, min_val=rig.ao.min_v, max_val=rig.ao.max_v
+                )
+            if self._ao_clocked:
+                ao.timing.cfg_samp_clk_timing(rig.loop.rate_hz, source=clock, sample_mode=hwtsp)
+            self._ai_reader = nidaqmx.stream_readers.AnalogMultiChannelReader(ai.in_stream)
+            self._ci_reader = nidaqmx.stream_readers.CounterReader(ci.in_stream)
+            self._writer = nidaqmx.stream_writers.AnalogMultiChannelWriter(
+                ao.out_stream, auto_start=False
+            )
+            self._ao_buf[:] = rig.ao.safe_v
+            try:  # the first value of the timed AO task: safe (the on-demand write already set it)
+                self._writer.write_one_sample(self._ao_buf, timeout=self._timeout)
+            except nidaqmx.errors.DaqError as err:
+                log.warning(
+                    "%s: pre-start AO write refused (DAQmx %s); the on-demand safe value holds",
+                    dev,
+                    err.error_code,
+                )
+            step = "starting the tasks"
+            ci.start()
+            ao.start()
+            ai.start()  # the master clock last
+        except nidaqmx.errors.DaqNotFoundError as err:
+            self._abort()
+            raise DaqUnavailableError(
+                dev, (), f"NI-DAQmx driver not found ({err}); cannot open DAQ device {dev!r}"
+            ) from err
+        except nidaqmx.errors.DaqError as err:
+            self._abort()
+            hint = ""
+            if (
+                err.error_code == -200842
+                or "HW_TIMED" in str(err).upper()
+                or "single point" in str(err).lower()
+            ):
+                hint = " (if the device cannot time this channel type in HW-timed single point, set loop.ci_timing / loop.ao_timing: on_demand or loop.timing: software)"
+            raise DaqSetupError(
+                f"{dev}: {step} failed: DAQmx {err.error_code}: {_first_line(err)}{hint}"
+            ) from err
+        self._counts = 0
+        self.is_open = True
+
+    def _new_task(self) -> Any:
+        task = self._nidaqmx.Task()
+        self._tasks.append(task)
+        return task
+
+    def _write_safe_on_demand(self) -> None:
+        """A throw-away on-demand AO task: both valves to the safe value, immediately."""
+        rig = self.rig
+        task = self._nidaqmx.Task()
+        try:
+            for name, channel in (
+                ("valve_linear", rig.channels.valve_linear),
+                ("valve_rotary", rig.channels.valve_rotary),
+            ):
+                task.ao_channels.add_ao_voltage_chan(
+                    self._phys(channel), name, min_val=rig.ao.min_v, max_val=rig.ao.max_v
+                )
+            task.write([rig.ao.safe_v, rig.ao.safe_v], auto_start=True, timeout=1.0)
+        finally:
+            task.close()
+
+    def _abort(self) -> None:
+        try:
+            self.close()
+        except Exception as err:  # the setup error is the one to report
+            log.error("while cleaning up after a failed open: %s", err)
+
+    def close(self) -> None:
+        """Stop and close every task (AI first: it is the clock), then write the safe value on demand.
+
+        Every step is tried; the first failure is raised afterwards as :class:`DaqIoError`.
+        """
+        nidaqmx = self._nidaqmx
+        if nidaqmx is None:
+            return
+        errors: list[str] = []
+        for task in self._tasks:  # creation order: AI, CI, AO
+            try:
+                task.stop()
+            except nidaqmx.errors.Error as err:
+                errors.append(f"stop: {_first_line(err)}")
+        for task in self._tasks:
+            try:
+                task.close()
+            except nidaqmx.errors.Error as err:
+                errors.append(f"close: {_first_line(err)}")
+        self._tasks.clear()
+        self._ai_reader = self._ci_reader = self._writer = None
+        was_open, self.is_open = self.is_open, False
+        try:
+            self._write_safe_on_demand()
+        except nidaqmx.errors.Error as err:
+            errors.append(f"safe write: {_first_line(err)}")
+        if errors and was_open:
+            raise DaqIoError(f"{self.rig.device}: closing the DAQ: " + "; ".join(errors))
+        for e in errors:
+            log.error("%s: closing the DAQ: %s", self.rig.device, e)
+
+    # ------------------------------------------------------------------ cycle
+    def read(self) -> RawSample:
+        """One sample of the four AI channels and the encoder count (blocks on the clock in HW mode)."""
+        errors = self._nidaqmx.errors
+        late: list[int] = []
+        raw_count = None
+        try:
+            self._ai_reader.read_one_sample(self._ai_buf, timeout=self._timeout)
+        except errors.DaqError as err:
+            if err.error_code not in LATE_CODES:
+                raise DaqIoError(
+                    f"{self.rig.device}: AI read failed: DAQmx {err.error_code}: {_first_line(err)}"
+                ) from err
+            late.append(err.error_code)
+        try:
+            raw_count = self._ci_reader.read_one_sample_double(timeout=self._timeout)
+        except errors.DaqError as err:
+            if err.error_code not in LATE_CODES:
+                raise DaqIoError(
+                    f"{self.rig.device}: encoder read failed: DAQmx {err.error_code}: {_first_line(err)}"
+                ) from err
+            late.append(err.error_code)
+        if late:
+            raise LateCycleError(tuple(late))
+        self._counts = unwrap_counts(self._counts, round(raw_count), self.rig.encoder.counter_bits)
+        v = self._ai_buf
+        return RawSample((float(v[0]), float(v[1]), float(v[2]), float(v[3])), self._counts)
+
+    def write(self, u_linear: float, u_rotary: float) -> None:
+        """Both valve voltages (clamped to the AO range); emitted at the next clock in HW mode."""
+        ao = self.rig.ao
+        self._ao_buf[0] = ao_volts(u_linear, ao)
+        self._ao_buf[1] = ao_volts(u_rotary, ao)
+        try:
+            self._writer.write_one_sample(self._ao_buf, timeout=self._timeout)
+        except self._nidaqmx.errors.DaqError as err:
+            if err.error_code in LATE_CODES:
+                raise LateCycleError((err.error_code,)) from err
+            raise DaqIoError(
+                f"{self.rig.device}: AO write failed: DAQmx {err.error_code}: {_first_line(err)}"
+            ) from err
+
+
+def _first_line(err: BaseException) -> str:
+    text = str(err).strip()
+    return text.splitlines()[0] if text else type(err).__name__

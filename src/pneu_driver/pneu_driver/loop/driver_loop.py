@@ -1,0 +1,450 @@
+"""The 1 kHz driver loop core: read → publish → newest command → supervisor → write.
+
+One cycle (DESIGN §3, k = tick, T = 1 ms):
+
+1. read sample k (hardware pacing: the HW-timed single-point read blocks until
+   clock k; software pacing: sleep + spin to the absolute deadline t0 + k·T);
+2. the supervisor checks it, ``on_sample(sample)`` publishes it;
+3. wait (at most ``command_deadline_us`` after the tick) for the expected
+   controllers' commands answering sample k, take the newest of each axis;
+4. the supervisor turns them into the voltages for tick k+1, which are written:
+   hardware AO on the sample clock emits them at clock k+1; software pacing
+   holds them and writes them at the deadline of tick k+1, just before reading
+   sample k+1 -- a one-sample transport delay either way.
+
+Deadlines are absolute (t0 + k·T), so errors never accumulate; a cycle that
+starts more than a whole period late skips the missed ticks (counted). DAQmx
+late errors (-209800/-209801/-209802) are counted as late cycles and the loop
+goes on; ``max_consecutive_late`` in a row stop it. Whatever ends the loop
+(``stop()``, ``n_cycles``, an exception), ``finally`` writes the safe value and
+closes the backend.
+
+Threads: ``run`` owns the backend and the loop; ``put_command``, ``stop``,
+``estop``, ``reset``, ``acknowledge`` and ``status`` may be called from any
+thread. Callbacks run in the loop thread and must be quick.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import numpy as np
+from pneu_msgs_py.contract.samples import AXES, SensorSample
+
+from pneu_driver.daq.backend import DaqBackend
+from pneu_driver.daq.errors import DriverError, LateCycleError
+from pneu_driver.daq.rig import RigParams
+from pneu_driver.daq.scaling import RawSample, Scaler
+from pneu_driver.loop.rt import enable_realtime
+from pneu_driver.safety.supervisor import SAFE_V, AxisStatus, SafetyEvent, SafetySupervisor
+
+__all__ = ["CommandSlot", "LoopStats", "DriverLoop"]
+
+log = logging.getLogger("pneu_driver.loop.driver_loop")
+
+
+class CommandSlot:
+    """The newest command per axis, set from any thread, taken by the loop thread.
+
+    A command with an older stamp than one already seen for its axis is dropped.
+    """
+
+    def __init__(self, axes: Iterable[str] = AXES):
+        self._cond = threading.Condition(threading.Lock())
+        self._newest = dict.fromkeys(axes, -(1 << 62))
+        self._pending: dict[str, tuple[float, int]] = {}
+
+    def put(self, axis: str, u: float, stamp_ns: int) -> bool:
+        """Store ``u`` [V] for ``axis`` (answering the sample stamped ``stamp_ns``); False if older."""
+        with self._cond:
+            if axis not in self._newest:
+                raise ValueError(
+                    f"axis: {axis!r} refused; allowed: one of {', '.join(self._newest)}"
+                )
+            if stamp_ns < self._newest[axis]:
+                return False
+            self._newest[axis] = stamp_ns
+            self._pending[axis] = (u, stamp_ns)
+            self._cond.notify_all()
+        return True
+
+    def wait_fresh(self, axes: tuple[str, ...], stamp_ns: int, timeout_s: float) -> bool:
+        """Block until every axis in ``axes`` has a command stamped ≥ ``stamp_ns`` (or the timeout)."""
+        newest = self._newest
+        with self._cond:
+            return self._cond.wait_for(
+                lambda: all(newest[a] >= stamp_ns for a in axes), max(timeout_s, 0.0)
+            )
+
+    def take(self) -> list[tuple[str, float, int]]:
+        """The commands that arrived since the last take: (axis, u, stamp_ns)."""
+        with self._cond:
+            if not self._pending:
+                return []
+            out = [(a, u, s) for a, (u, s) in self._pending.items()]
+            self._pending.clear()
+        return out
+
+
+class LoopStats:
+    """Cycle timing of one run. ``lateness`` = cycle start − deadline [ns].
+
+    Software pacing: the start against the absolute deadline t0 + k·T.
+    Hardware pacing: the read's return against the previous one + T (the
+    clock itself is exact; this is the software's jitter around it).
+    A cycle is on time when |lateness| ≤ ``tol_ns``; skipped ticks count as
+    not on time.
+    """
+
+    def __init__(self, window: int, tol_ns: int):
+        self.tol_ns = int(tol_ns)
+        self.cycles = 0
+        self.on_time = 0
+        self.late_cycles = 0  # started beyond tol, or a DAQmx late error
+        self.missed_ticks = 0  # ticks skipped entirely
+        self.daq_late_errors = 0
+        self.max_lateness_ns = 0
+        self._ring = np.zeros(int(window), dtype=np.int64)
+        self._n = 0
+        self._last_on_time = False
+
+    def record(self, lateness_ns: int, late: bool = False) -> None:
+        """One cycle's start lateness; ``late`` forces it late (a DAQmx late error)."""
+        ring = self._ring
+        ring[self._n % ring.shape[0]] = lateness_ns
+        self._n += 1
+        self.cycles += 1
+        mag = abs(lateness_ns)
+        self._last_on_time = mag <= self.tol_ns and not late
+        if self._last_on_time:
+            self.on_time += 1
+        else:
+            self.late_cycles += 1
+        if mag > self.max_lateness_ns:
+            self.max_lateness_ns = mag
+
+    def mark_late(self) -> None:
+        """The last recorded cycle turned out late (a DAQmx late error on its write)."""
+        if self._last_on_time:
+            self._last_on_time = False
+            self.on_time -= 1
+            self.late_cycles += 1
+
+    def lateness_ns(self) -> np.ndarray:
+        """The most recent lateness values (up to the window), oldest first."""
+        n, w = self._n, self._ring.shape[0]
+        if n <= w:
+            return self._ring[:n].copy()
+        i = n % w
+        return np.concatenate((self._ring[i:], self._ring[:i]))
+
+    @property
+    def on_time_ratio(self) -> float:
+        total = self.cycles + self.missed_ticks
+        return self.on_time / total if total else math.nan
+
+    def jitter_us(self, q: float = 99.0) -> float:
+        """The q-th percentile of |lateness| over the window [µs]."""
+        lat = self.lateness_ns()
+        if lat.size == 0:
+            return math.nan
+        return float(np.percentile(np.abs(lat), q)) * 1e-3
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "cycles": self.cycles,
+            "on_time": self.on_time,
+            "late_cycles": self.late_cycles,
+            "missed_ticks": self.missed_ticks,
+            "daq_late_errors": self.daq_late_errors,
+            "on_time_ratio": self.on_time_ratio,
+            "jitter_us_p99": self.jitter_us(99.0),
+            "max_lateness_us": self.max_lateness_ns * 1e-3,
+        }
+
+
+class DriverLoop:
+    """The driver's loop core around a :class:`~pneu_driver.daq.backend.DaqBackend`.
+
+    Parameters
+    ----------
+    backend
+        The DAQ (``NidaqmxBackend``) or a plant behind ``SimBackend``.
+    rig
+        Loop rate, pacing, command deadline, tolerances, AO safe value.
+    supervisor
+        Its sample time must be the loop period and its ``counts_per_rev`` the rig's.
+    on_sample
+        Called with each :class:`SensorSample` (publish it).
+    on_events
+        Called with the supervisor's transitions (publish on ``/diagnostics``).
+    expected_axes
+        Axes whose controller's command for sample k the loop waits for
+        (at most ``command_deadline_us``); the others are not waited for.
+    epoch_ns
+        Stamp of tick 0: ``stamp_ns = epoch_ns + k·T``.
+    clock_ns, sleep
+        Injectable clock (monotonic int ns) and sleep [s] for tests.
+    """
+
+    def __init__(
+        self,
+        backend: DaqBackend,
+        rig: RigParams,
+        supervisor: SafetySupervisor,
+        *,
+        on_sample: Callable[[SensorSample], None] | None = None,
+        on_events: Callable[[list[SafetyEvent]], None] | None = None,
+        expected_axes: Iterable[str] = AXES,
+        epoch_ns: int = 0,
+        clock_ns: Callable[[], int] = time.perf_counter_ns,
+        sleep: Callable[[float], None] = time.sleep,
+    ):
+        if rig.loop.timing == "hardware" and not backend.hardware_paced:
+            raise ValueError(
+                "loop.timing: 'hardware' refused for a backend that does not block on a sample clock; allowed: software"
+            )
+        if abs(supervisor.sample_time_s - rig.period_s) > 1e-12:
+            raise ValueError(
+                f"supervisor sample_time_s {supervisor.sample_time_s!r} refused; allowed: the loop period {rig.period_s!r} s"
+            )
+        if supervisor.params.counts_per_rev != rig.encoder.counts_per_rev:
+            raise ValueError(
+                f"safety counts_per_rev: {supervisor.params.counts_per_rev} refused; allowed: the rig's encoder counts per revolution {rig.encoder.counts_per_rev}"
+            )
+        if rig.ao.safe_v != SAFE_V:
+            raise ValueError(
+                f"ao.safe_v: {rig.ao.safe_v} refused; allowed: {SAFE_V} V (the supervisor's safe value)"
+            )
+        self.expected_axes = tuple(expected_axes)
+        for a in self.expected_axes:
+            if a not in AXES:
+                raise ValueError(f"expected_axes: {a!r} refused; allowed: {', '.join(AXES)}")
+        self.backend = backend
+        self.rig = rig
+        self.hardware_paced = bool(backend.hardware_paced)
+        self._sup = supervisor
+        self._on_sample = on_sample
+        self._on_events = on_events
+        self._epoch_ns = int(epoch_ns)
+        self._clock = clock_ns
+        self._sleep = sleep
+        self._T = rig.period_ns
+        self._cmd_deadline_ns = round(rig.loop.command_deadline_us * 1e3)
+        self._spin_ns = round(rig.loop.spin_us * 1e3)
+        self._scaler = Scaler(rig)
+        self._lock = threading.Lock()  # guards the supervisor
+        self._stop = threading.Event()
+        self.commands = CommandSlot(AXES)
+        self.stats = LoopStats(rig.loop.stats_window, round(rig.loop.on_time_tol_us * 1e3))
+        self.error: BaseException | None = None
+        self.last_sample: SensorSample | None = None
+        self.realtime_notes: list[str] = []
+
+    # ------------------------------------------------------------ any thread
+    def put_command(self, axis: str, u: float, stamp_ns: int) -> bool:
+        """A controller's valve command (V) answering the sample stamped ``stamp_ns``."""
+        return self.commands.put(axis, u, stamp_ns)
+
+    def stop(self) -> None:
+        """Ask the loop to finish its cycle, write the safe value and close."""
+        self._stop.set()
+
+    def estop(self, reason: str) -> None:
+        with self._lock:
+            self._sup.estop(reason)
+
+    def reset(self) -> tuple[bool, str]:
+        with self._lock:
+            return self._sup.reset()
+
+    def acknowledge(self, axis: str) -> tuple[bool, str]:
+        with self._lock:
+            return self._sup.acknowledge(axis)
+
+    def status(self) -> dict[str, AxisStatus]:
+        with self._lock:
+            return self._sup.status
+
+    def diagnostics(self) -> dict[str, str]:
+        """Key-values for the driver's periodic ``/diagnostics`` status (loop timing and axis states)."""
+        out = {
+            k: f"{v:.6g}" if isinstance(v, float) else str(v)
+            for k, v in self.stats.as_dict().items()
+        }
+        out["pacing"] = "hardware" if self.hardware_paced else "software"
+        out["realtime"] = "; ".join(self.realtime_notes) or "normal scheduling"
+        for axis, st in self.status().items():
+            out[f"{axis}.state"] = st.state
+            out[f"{axis}.causes"] = ",".join(st.causes)
+        return out
+
+    def start(
+        self, n_cycles: int | None = None, name: str = "pneu_driver_loop"
+    ) -> threading.Thread:
+        """Run in a new thread; an exception ends up in ``self.error`` (the valves are safe)."""
+
+        def target() -> None:
+            try:
+                self.run(n_cycles)
+            except BaseException as err:  # reported through self.error
+                self.error = err
+                log.error("driver loop stopped: %s", err)
+
+        th = threading.Thread(target=target, name=name, daemon=True)
+        th.start()
+        return th
+
+    # ------------------------------------------------------------ loop thread
+    def run(
+        self, n_cycles: int | None = None, stop_event: threading.Event | None = None
+    ) -> LoopStats:
+        """Open the backend and run ``n_cycles`` (None: until :meth:`stop` or ``stop_event``)."""
+        if n_cycles is not None and n_cycles < 0:
+            raise ValueError(f"n_cycles: {n_cycles!r} refused; allowed: an integer ≥ 0 or None")
+        stop = stop_event or self._stop  # a stop() before run() ends it at once
+        notes, restore_rt = enable_realtime(self.rig.loop.rt_priority, self.rig.loop.timerslack_ns)
+        self.realtime_notes = notes
+        try:
+            self.backend.open()  # leaves the valves safe; cleans up after itself if it fails
+        except BaseException:
+            restore_rt()
+            raise
+        try:
+            try:
+                if self.hardware_paced:
+                    self._run_hardware(n_cycles, stop)
+                else:
+                    self._run_software(n_cycles, stop)
+            except BaseException:
+                self._shutdown(
+                    raise_errors=False
+                )  # the error that ended the loop is the one to see
+                raise
+            self._shutdown(raise_errors=True)
+        finally:
+            restore_rt()
+        return self.stats
+
+    def _stopped(self, stop: threading.Event) -> bool:
+        return stop.is_set() or self._stop.is_set()
+
+    def _run_software(self, n_cycles: int | None, stop: threading.Event) -> None:
+        T, clock, stats, backend = self._T, self._clock, self.stats, self.backend
+        pending = (SAFE_V, SAFE_V)
+        t0 = clock() + T  # deadline of tick 0
+        k = 0
+        cycles = 0
+        while not self._stopped(stop) and (n_cycles is None or cycles < n_cycles):
+            deadline = t0 + k * T
+            self._wait_until(deadline)
+            late = clock() - deadline
+            if late >= T:  # whole ticks missed: skip to the current one
+                skip = late // T
+                k += skip
+                deadline += skip * T
+                late -= skip * T
+                stats.missed_ticks += skip
+            stats.record(late)
+            backend.write(*pending)  # the command computed from sample k-1, at tick k
+            raw = backend.read()
+            pending = self._cycle(k, raw, deadline)
+            k += 1
+            cycles += 1
+
+    def _run_hardware(self, n_cycles: int | None, stop: threading.Event) -> None:
+        T, clock, stats, backend = self._T, self._clock, self.stats, self.backend
+        max_late = self.rig.loop.max_consecutive_late
+        k = -1
+        t_prev: int | None = None
+        consecutive = 0
+        cycles = 0
+        while not self._stopped(stop) and (n_cycles is None or cycles < n_cycles):
+            raw: RawSample | None
+            try:
+                raw = backend.read()  # blocks until the next sample clock
+            except LateCycleError as err:
+                raw = None
+                stats.daq_late_errors += 1
+                consecutive += 1
+                if consecutive >= max_late:
+                    raise DriverError(
+                        f"{consecutive} late cycles in a row (last: {err}); stopping with the valves safe"
+                    ) from err
+            now = clock()
+            step = 1
+            if (
+                raw is None and t_prev is not None
+            ):  # missed clock(s): how many, from the elapsed time
+                step = max(1, round((now - t_prev) / T))
+            stats.record(0 if t_prev is None else now - t_prev - step * T, late=raw is None)
+            stats.missed_ticks += step - 1
+            k += step
+            t_prev = now
+            if raw is None:
+                stamp = self._epoch_ns + k * T
+                with self._lock:
+                    out = self._sup.outputs(stamp + T)  # the watchdog still runs
+                    events = self._sup.events()
+                if events and self._on_events is not None:
+                    self._on_events(events)
+            else:
+                consecutive = 0
+                out = self._cycle(k, raw, now)
+            try:
+                backend.write(*out)  # HW AO: emitted at clock k+1
+            except LateCycleError:
+                stats.daq_late_errors += 1
+                stats.mark_late()
+            cycles += 1
+
+    def _cycle(self, k: int, raw: RawSample, tick_ns: int) -> tuple[float, float]:
+        """Sample k → supervisor → publish → commands → outputs for tick k+1."""
+        T = self._T
+        stamp = self._epoch_ns + k * T
+        sample = self._scaler.sample(k, stamp, raw)
+        self.last_sample = sample
+        sup = self._sup
+        with self._lock:
+            sup.check_sample(sample, raw.volts)
+        if self._on_sample is not None:
+            self._on_sample(sample)
+        if self.expected_axes:
+            remaining = tick_ns + self._cmd_deadline_ns - self._clock()
+            self.commands.wait_fresh(self.expected_axes, stamp, remaining * 1e-9)
+        cmds = self.commands.take()
+        with self._lock:
+            for axis, u, st in cmds:
+                sup.command(axis, u, st)
+            out = sup.outputs(stamp + T)
+            events = sup.events()
+        if events and self._on_events is not None:
+            self._on_events(events)
+        return out
+
+    def _wait_until(self, deadline: int) -> None:
+        """Sleep until ``spin_us`` before the deadline, then spin on the clock."""
+        clock = self._clock
+        remaining = deadline - clock()
+        if remaining > self._spin_ns:
+            self._sleep((remaining - self._spin_ns) * 1e-9)
+        while clock() < deadline:
+            pass
+
+    def _shutdown(self, raise_errors: bool) -> None:
+        """Safe value, then close (the backend writes it once more on close)."""
+        try:
+            self.backend.write(SAFE_V, SAFE_V)
+        except Exception as err:
+            log.error("writing the safe value at shutdown failed: %s", err)
+        try:
+            self.backend.close()
+        except Exception as err:
+            if raise_errors:
+                raise
+            log.error("closing the backend after an error failed: %s", err)

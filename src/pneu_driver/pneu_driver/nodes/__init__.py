@@ -1,0 +1,1 @@
+"""The driver node: an rclpy shell around the driver loop."""

@@ -1,0 +1,274 @@
+"""``ros2 run pneu_driver driver_node``: the rig through nidaqmx (rclpy shell).
+
+The 1 kHz loop (:class:`pneu_driver.loop.driver_loop.DriverLoop` around
+:class:`pneu_driver.daq.nidaqmx_backend.NidaqmxBackend` and the
+:class:`pneu_driver.safety.supervisor.SafetySupervisor`) runs in its own thread and
+paces itself on the DAQ's sample clock; this node only publishes its
+samples, hands the controllers' commands to it, serves ``~/estop`` and
+``~/reset`` and reports ``/diagnostics``. The backend writes 5 V (valves
+closed) before the tasks start; the loop's ``finally`` writes it again on
+stop or on any exception. No DAQ -> one line naming the device and the
+devices visible, exit status 1.
+"""
+
+from __future__ import annotations
+
+import collections
+import signal
+import sys
+import threading
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from pneu_msgs_py.contract.convert import (
+    DiagStatus,
+    command_from_msg,
+    fill_diagnostic_array,
+    fill_fluid_pressure,
+    fill_joint_state,
+    sample_to_values,
+)
+from pneu_msgs_py.contract.qos import COMMAND_SUB_REALTIME, DIAGNOSTICS, to_rclpy
+from pneu_msgs_py.contract.samples import AXES
+from pneu_msgs_py.contract.topics import (
+    DIAGNOSTICS_TOPIC,
+    JOINT_STATE_TOPIC,
+    PRESSURE_TOPICS,
+    VALVE_COMMAND_TOPIC,
+    qos_for,
+)
+from pneu_msgs_py.params.core import ParamError
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy import qos as rq
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.task import Future
+from sensor_msgs.msg import FluidPressure, JointState
+from std_srvs.srv import Trigger
+
+from pneu_driver.daq.errors import DriverError
+from pneu_driver.daq.nidaqmx_backend import NidaqmxBackend, visible_devices
+from pneu_driver.daq.rig import load_rig_params
+from pneu_driver.loop.driver_loop import DriverLoop
+from pneu_driver.safety.supervisor import load_safety_params
+
+SENSOR_TOPICS = (*PRESSURE_TOPICS, JOINT_STATE_TOPIC["linear"], JOINT_STATE_TOPIC["rotary"])
+_LEVEL = {"OK": 0, "WARN": 1, "ERROR": 2}
+
+
+class DriverNode(Node):
+    def __init__(self, **node_kwargs):
+        super().__init__("pneu_driver", **node_kwargs)
+        ro = {"read_only": True}
+        self.declare_parameter(
+            "rig_file",
+            "",
+            ParameterDescriptor(
+                description="rig YAML: DAQ map, scaling, loop ('' = installed config/rig.yaml)",
+                **ro,
+            ),
+        )
+        self.declare_parameter(
+            "safety_file",
+            "",
+            ParameterDescriptor(
+                description="safety YAML ('' = installed config/safety.yaml)", **ro
+            ),
+        )
+        self.declare_parameter(
+            "axes",
+            "both",
+            ParameterDescriptor(
+                description="axes whose controller's command for sample k the loop waits for",
+                additional_constraints="one of linear, rotary, both, none",
+                **ro,
+            ),
+        )
+        axes = self.get_parameter("axes").value
+        choices = {"linear": ("linear",), "rotary": ("rotary",), "both": AXES, "none": ()}
+        if axes not in choices:
+            raise ParamError("axes", axes, "one of " + ", ".join(choices))
+        rig = load_rig_params(self.get_parameter("rig_file").value or None)
+        safety = load_safety_params(self.get_parameter("safety_file").value or None)
+        seen = visible_devices(rig.device)  # DaqUnavailableError without the NI driver
+        if rig.device not in seen:
+            from pneu_driver.daq.errors import DaqUnavailableError
+
+            raise DaqUnavailableError(rig.device, seen)
+        from pneu_driver.safety.supervisor import SafetySupervisor
+
+        self.msgs = {
+            t: FluidPressure() if t in PRESSURE_TOPICS else JointState() for t in SENSOR_TOPICS
+        }
+        self.pubs = {
+            t: self.create_publisher(type(self.msgs[t]), t, to_rclpy(qos_for(t, "realtime"), rq))
+            for t in SENSOR_TOPICS
+        }
+        self.diag_pub = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
+        )
+        self.loop = DriverLoop(
+            NidaqmxBackend(rig),
+            rig,
+            SafetySupervisor(safety, sample_time_s=rig.period_s),
+            on_sample=self._publish_sample,  # loop thread
+            on_events=self._queue_events,  # loop thread
+            expected_axes=choices[axes],
+            epoch_ns=self.get_clock().now().nanoseconds + rig.period_ns,  # stamps on the ROS clock
+        )
+        for a in AXES:
+            self.create_subscription(
+                JointState,
+                VALVE_COMMAND_TOPIC[a],
+                lambda m, a=a: self._on_command(m, a),
+                to_rclpy(COMMAND_SUB_REALTIME, rq),
+            )
+        self.create_service(Trigger, "~/estop", self._on_estop)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(1.0, self._diagnostics, clock=steady)
+        self.create_timer(0.1, self._publish_events, clock=steady)
+        self.done = Future()
+        self.events: collections.deque = collections.deque(maxlen=10000)
+        self.stamp_offset_ns: int | None = None
+        self.thread: threading.Thread | None = None
+        self.device = rig.device
+
+    def start(self) -> None:
+        self.thread = self.loop.start(name="pneu_driver_loop")
+        self.get_logger().info(f"driver loop running on {self.device}")
+
+    # -- loop thread ---------------------------------------------------------
+    def _publish_sample(self, s) -> None:
+        if (
+            self.stamp_offset_ns is None
+        ):  # ROS clock at the first sample vs its stamp (epoch estimate)
+            self.stamp_offset_ns = self.get_clock().now().nanoseconds - s.stamp_ns
+        for topic, (frame, names, pos, vel) in sample_to_values(s).items():
+            m = self.msgs[topic]
+            if topic in PRESSURE_TOPICS:
+                fill_fluid_pressure(m, s.stamp_ns, pos[0], frame)
+            else:
+                fill_joint_state(m, s.stamp_ns, names, pos, vel)
+            self.pubs[topic].publish(m)
+
+    def _queue_events(self, events) -> None:
+        self.events.extend(events)  # published from the executor thread (one publisher, one thread)
+
+    # -- executor thread ------------------------------------------------------
+    def _publish_events(self) -> None:
+        """Supervisor transitions, one DiagnosticArray per sample stamp (``pneu analyze`` reads them)."""
+        by_stamp: dict[int, list] = {}
+        while self.events:
+            e = self.events.popleft()
+            by_stamp.setdefault(e.stamp_ns, []).append(
+                DiagStatus(
+                    _LEVEL[e.level],
+                    f"pneu_driver: safety {e.axis} {e.rule}",
+                    e.message,
+                    self.device,
+                    dict(e.values),
+                )
+            )
+        for stamp, statuses in by_stamp.items():
+            self._publish(statuses, stamp)
+
+    def _on_command(self, msg: JointState, axis: str) -> None:
+        try:
+            stamp_ns, u = command_from_msg(msg, axis)
+        except ValueError as err:
+            self.get_logger().warning(
+                f"{axis} valve command ignored: {err}", throttle_duration_sec=1.0
+            )
+            return
+        self.loop.put_command(axis, u, stamp_ns)
+
+    def _on_estop(self, request, response):
+        self.loop.estop("service ~/estop")
+        response.success, response.message = (
+            True,
+            "e-stop latched: both valves at 5 V until ~/reset",
+        )
+        return response
+
+    def _on_reset(self, request, response):
+        response.success, response.message = self.loop.reset()
+        return response
+
+    def _diagnostics(self) -> None:
+        stats = {
+            k: f"{v:.6g}" if isinstance(v, float) else str(v)
+            for k, v in self.loop.stats.as_dict().items()
+        }
+        err = self.loop.error
+        running = self.thread is not None and self.thread.is_alive()
+        level = 2 if err is not None or not running else (1 if self.loop.stats.late_cycles else 0)
+        msg = f"stopped: {err}" if err is not None else ("running" if running else "not running")
+        statuses = [DiagStatus(level, "pneu_driver: loop", msg, self.device, stats)]
+        for axis, st in self.loop.status().items():
+            lvl = 0 if st.state == "OK" else (1 if st.state == "LIMITED" else 2)
+            statuses.append(
+                DiagStatus(
+                    lvl,
+                    f"pneu_driver: safety {axis}",
+                    st.state,
+                    self.device,
+                    {"causes": ",".join(st.causes)},
+                )
+            )
+        self._publish(statuses)
+        if self.thread is not None and not running and not self.done.done():
+            self.done.set_result(err)  # the loop ended (error or stop): leave spin
+
+    def _publish(self, statuses, stamp_ns: int | None = None) -> None:
+        now = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
+        self.diag_pub.publish(
+            fill_diagnostic_array(DiagnosticArray(), DiagnosticStatus, KeyValue, now, statuses)
+        )
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = DriverNode()
+        node.start()
+        from rclpy.executors import SingleThreadedExecutor
+
+        try:
+            from rclpy.experimental import EventsExecutor
+
+            executor = EventsExecutor()
+        except ImportError:
+            executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin_until_future_complete(node.done)
+        if node.loop.error is not None:
+            print(f"driver_node: error: {node.loop.error}", file=sys.stderr)
+            code = 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (DriverError, ParamError, ParameterException, OSError, ValueError) as err:
+        print(f"driver_node: error: {err}", file=sys.stderr)
+        code = 1
+    finally:
+        # Ctrl-C reaches a launched node twice (the terminal's process group, then
+        # launch's forward): the second SIGINT must not cut the cleanup short.
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            if node is not None:
+                node.loop.stop()  # the loop's finally writes 5 V and closes the tasks
+                if node.thread is not None:
+                    node.thread.join(timeout=2.0)
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

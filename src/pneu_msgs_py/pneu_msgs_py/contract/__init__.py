@@ -1,0 +1,1 @@
+"""The message contract: topics, QoS, units, sensor samples and message conversions."""

@@ -1,0 +1,1 @@
+"""The parameter framework: one frozen dataclass per group, validation, YAML, ROS descriptors."""

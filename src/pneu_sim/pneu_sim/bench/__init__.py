@@ -1,0 +1,1 @@
+"""Benchmarks of the plant (timed by ``pneu bench``, never by tests)."""

@@ -1,0 +1,1 @@
+"""``pneu sim``: open-loop runs of the twin."""

@@ -1,0 +1,1 @@
+"""Injected faults (sensors, valves, plant, controllers) for tests and rehearsal."""

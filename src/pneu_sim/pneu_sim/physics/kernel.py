@@ -1,0 +1,493 @@
+"""The twin's inner loop: one 1 ms sample period of both axes and the sensor sample.
+
+Everything here is numba ``@njit(cache=True)`` over float64 arrays; the same
+functions run as plain Python through ``.py_func`` (the reference the fast path is
+tested against). Layouts of the state vector ``st`` and the parameter vector ``prm``
+are the index constants below; :mod:`pneu_sim.physics.pack` fills ``prm`` from
+:class:`~pneu_sim.physics.params.PlantParams`.
+
+Integration (per substep h = T / n_sub, inputs held over T):
+
+1. Valve spools: exact zero-order-hold discretisation of
+   s'' = ω_n² (u − s) − 2 ζ ω_n s' (exact for any h), stroke clamped to 0..10 V,
+   then a play operator of width ``hysteresis`` gives the effective opening y.
+2. Piston (Eq. 1 with errata −A_r p_a): Karnopp stick/slip, semi-implicit Euler,
+   viscous term implicit; sliding friction Eq. 2 with S(ẋ) → sign(ẋ) plus a Stribeck
+   breakaway bump; a velocity that would cross zero within a step stops (stick).
+   End stops ±L/2: exact inelastic clamp (x clamped, outward v → 0): never passes,
+   never gains energy.
+3. Chambers (Eq. 4–5, polytropic n): the volume term is integrated exactly,
+   p ← p (V_old/V_new)^n, so with no flow p V^n is conserved to rounding; the flow
+   term is linearly implicit with the analytic ∂ṁ/∂p of the ISO 6358 flow, which
+   keeps the stiff dead-volume dynamics stable at h = 0.1 ms.
+4. Motor (Eq. 6–10): same stick/slip scheme on θ, ω; inlet p_m1 fed by the valve and
+   drained by the swept displacement and leakage; exhaust p_m2 filled by them and
+   drained through the silencer orifice; both linearly implicit.
+5. Sensors: first-order lags (exact per substep).
+
+The scheme is first order in h; test_sim_integrator shows the convergence.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# ---------------------------------------------------------------- state layout
+S_X = 0  # piston position, m
+S_V = 1  # piston velocity, m/s
+S_PC1 = 2  # chamber 1 pressure, Pa abs
+S_PC2 = 3  # chamber 2 pressure, Pa abs
+S_TH = 4  # motor angle, rad
+S_OM = 5  # motor speed, rad/s
+S_PM1 = 6  # motor inlet chamber, Pa abs
+S_PM2 = 7  # motor exhaust chamber, Pa abs
+S_SL = 8  # linear valve spool position (V equivalent)
+S_SDL = 9  # its velocity, V/s
+S_YL = 10  # its effective opening after hysteresis, V
+S_SR = 11  # rotary valve spool position
+S_SDR = 12
+S_YR = 13
+S_MC1 = 14  # gas mass chamber 1, kg
+S_MC2 = 15  # gas mass chamber 2, kg
+S_FP1 = 16  # pressure sensor lag states, Pa abs
+S_FP2 = 17
+S_FPM1 = 18
+S_FX = 19  # laser lag state, m
+S_T = 20  # time, s
+S_CNT = 21  # encoder counts at the last tick (exact integer in float64)
+S_UL = 22  # AO value held on the linear valve, V
+S_UR = 23  # AO value held on the rotary valve, V
+N_STATE = 24
+
+# ---------------------------------------------------------------- parameter layout
+P_PA = 0
+P_RT = 1  # R * T0
+P_N = 2  # polytropic index
+P_C1T = 3  # C_1 / sqrt(T0)
+P_PSL = 4
+P_PSR = 5
+P_AC1 = 6
+P_AC2 = 7
+P_AR = 8
+P_V1D = 9
+P_V2D = 10
+P_M = 11
+P_AF = 12
+P_FS = 13  # static (breakaway) friction, N
+P_VS = 14
+P_CV = 15
+P_L = 16
+P_RM = 17
+P_DM = 18
+P_LM = 19
+P_RRM = 20  # rotor radius r_m
+P_NV = 21  # vanes
+P_J = 22
+P_MC = 23
+P_MS = 24  # static friction torque
+P_MV = 25  # N*m*s/rad
+P_VM1 = 26
+P_VM2 = 27
+P_KEX = 28  # silencer A_ex * C_1 / sqrt(T0)
+P_KLK = 29
+P_PFS = 30  # pressure sensor FS, Pa
+P_PVFS = 31
+P_PSIG = 32
+P_POFF = 33  # 3 offsets, V: 33, 34, 35
+P_PALPHA = 36  # per-substep lag factor 1 - exp(-h/tau)
+P_XRANGE = 37
+P_XVFS = 38
+P_XSIG = 39  # V
+P_XALPHA = 40
+P_AIRP = 41  # AI range pressure, V
+P_AILSBP = 42
+P_AIRX = 43
+P_AILSBX = 44
+P_AINMAX = 45  # AI codes - 1
+P_AOR = 46
+P_AOLSB = 47
+P_AONMAX = 48
+P_CPR = 49  # counts per revolution (4 * ppr)
+P_T = 50
+P_NSUB = 51
+P_H = 52
+P_VALVE_L = 53  # valve block base (linear)
+# valve block: offsets
+VB_AMAX = 0
+VB_ALEAK = 1
+VB_B = 2
+VB_BLAM = 3
+VB_HW = 4  # half hysteresis width
+VB_DULAP = 5
+VB_PHI11 = 6
+VB_PHI12 = 7
+VB_PHI21 = 8
+VB_PHI22 = 9
+VB_G1 = 10
+VB_G2 = 11
+VB_TAB = 12  # TAB_N samples of area fraction on a 0.01 V grid
+TAB_N = 501
+TAB_DU = 0.01
+VB_SIZE = VB_TAB + TAB_N
+P_VALVE_R = P_VALVE_L + VB_SIZE
+N_PRM = P_VALVE_R + VB_SIZE
+
+# sensor output layout
+O_PC1 = 0
+O_PC2 = 1
+O_PM1 = 2
+O_X = 3
+O_TH = 4
+O_OM = 5
+O_CNT = 6
+N_OUT = 7
+
+N_NOISE = 4  # p_c1, p_c2, p_m1, laser
+
+TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True)
+def iso_flow(p1, p2, K, b, b_lam):
+    """Mass flow from node 1 to node 2 through an ISO 6358 orifice (Eq. 11–12).
+
+    ṁ = K · p_u · C_d(r) · φ(r), r = p_d/p_u, K = A · C_1 / sqrt(T_u), with
+    φ = 1 (r ≤ b, choked), φ = sqrt(1 − ((r − b)/(1 − b))²) (subsonic, corrected:
+    errata Eq. 11), and a linear laminar patch φ ∝ (1 − r) for r ≥ b_lam so that
+    ∂ṁ/∂p stays finite at r → 1. C_d(r) = 0.8153 + 0.0933 r − 0.1038 r² (Eq. 12).
+    Signed: negative when p2 > p1. Returns (ṁ, ∂ṁ/∂p1, ∂ṁ/∂p2), kg/s and kg/(s·Pa).
+    """
+    if K <= 0.0:
+        return 0.0, 0.0, 0.0
+    if p1 >= p2:
+        pu = p1
+        pd = p2
+    else:
+        pu = p2
+        pd = p1
+    if pu <= 0.0:
+        return 0.0, 0.0, 0.0
+    r = pd / pu
+    cd = 0.8153 + 0.0933 * r - 0.1038 * r * r  # Eq. 12
+    dcd = 0.0933 - 0.2076 * r
+    if r <= b:
+        phi = 1.0
+        dphi = 0.0
+    elif r < b_lam:
+        s = (r - b) / (1.0 - b)
+        phi = math.sqrt(1.0 - s * s)
+        dphi = -s / ((1.0 - b) * phi)
+    else:
+        s = (b_lam - b) / (1.0 - b)
+        phil = math.sqrt(1.0 - s * s)
+        phi = phil * (1.0 - r) / (1.0 - b_lam)
+        dphi = -phil / (1.0 - b_lam)
+    g = cd * phi
+    dg = dcd * phi + cd * dphi
+    m = K * pu * g
+    dm_dpu = K * (g - r * dg)
+    dm_dpd = K * dg
+    if p1 >= p2:
+        return m, dm_dpu, dm_dpd
+    return -m, -dm_dpd, -dm_dpu
+
+
+@njit(cache=True)
+def area_fraction(prm, base, du):
+    """Opening area / A_max at |u − 5 V| = du (linear interpolation of the table)."""
+    q = du / TAB_DU
+    if q >= TAB_N - 1:
+        return prm[base + VB_TAB + TAB_N - 1]
+    i = int(q)
+    w = q - i
+    return prm[base + VB_TAB + i] * (1.0 - w) + prm[base + VB_TAB + i + 1] * w
+
+
+@njit(cache=True)
+def valve_areas(prm, base, y):
+    """Areas of the 5/3 paths for effective opening y (V).
+
+    Returns (A_s4, A_4e, A_s2, A_2e): supply→port 4 (chamber 1 / motor inlet),
+    port 4→exhaust, supply→port 2 (chamber 2), port 2→exhaust. u > 5 V opens
+    supply→4 and 2→exhaust; u < 5 V the reverse. Every path leaks A_leak at the
+    centre; on the closing paths the leak fades out over the first table step.
+    """
+    d = y - 5.0
+    ad = abs(d)
+    a_max = prm[base + VB_AMAX]
+    a_leak = prm[base + VB_ALEAK]
+    a_open = a_leak + area_fraction(prm, base, ad) * a_max
+    fade = 1.0 - ad / prm[base + VB_DULAP]
+    a_close = a_leak * fade if fade > 0.0 else 0.0
+    if d >= 0.0:
+        return a_open, a_close, a_close, a_open
+    return a_close, a_open, a_open, a_close
+
+
+@njit(cache=True)
+def spool_step(st, prm, base, i_s, i_sd, i_y, u):
+    """Exact ZOH step of the 2nd-order spool, stroke clamp, then the play operator."""
+    s = st[i_s]
+    sd = st[i_sd]
+    s_new = prm[base + VB_PHI11] * s + prm[base + VB_PHI12] * sd + prm[base + VB_G1] * u
+    sd_new = prm[base + VB_PHI21] * s + prm[base + VB_PHI22] * sd + prm[base + VB_G2] * u
+    if s_new > 10.0:
+        s_new = 10.0
+        if sd_new > 0.0:
+            sd_new = 0.0
+    elif s_new < 0.0:
+        s_new = 0.0
+        if sd_new < 0.0:
+            sd_new = 0.0
+    st[i_s] = s_new
+    st[i_sd] = sd_new
+    hw = prm[base + VB_HW]
+    y = st[i_y]
+    if s_new > y + hw:
+        y = s_new - hw
+    elif s_new < y - hw:
+        y = s_new + hw
+    st[i_y] = y
+    return y
+
+
+@njit(cache=True)
+def vane_factor(prm, theta):
+    """K(θ) = ½ L_m (d² cos 2θ_v + 2 d R cos θ_v + R² − r²), M_m = K (p_m1 − p_m2) (Eq. 8).
+
+    θ_v is the working vane's angle within its sector, θ_v ∈ [−π/z, π/z) for z vanes,
+    so the torque ripple has period 2π/z. Units m³.
+    """
+    z = prm[P_NV]
+    sector = TWO_PI / z
+    tv = theta - sector * math.floor((theta + 0.5 * sector) / sector)
+    c = math.cos(tv)
+    d = prm[P_DM]
+    R = prm[P_RM]
+    r = prm[P_RRM]
+    return 0.5 * prm[P_LM] * (d * d * (2.0 * c * c - 1.0) + 2.0 * d * R * c + R * R - r * r)
+
+
+@njit(cache=True)
+def stick_slip(v, F, m, F_c, F_s, v_s, c_v, h):
+    """One semi-implicit Euler step of m v̇ = F − F_f(v) with Karnopp sticking.
+
+    Sliding: F_f = sign(v) (F_c + (F_s − F_c) exp(−(v/v_s)²)) + c_v v (Eq. 2 with
+    S → sign, plus a Stribeck bump; Eq. 9 when F_s = F_c). Stuck (v = 0): stays while
+    |F| ≤ F_s. A step whose velocity would change sign ends at v = 0 (stuck).
+    """
+    if v == 0.0:
+        if abs(F) <= F_s:
+            return 0.0
+        sg = 1.0 if F > 0.0 else -1.0
+        return h * (F - sg * F_s) / (m + h * c_v)
+    sg = 1.0 if v > 0.0 else -1.0
+    if v_s > 0.0:
+        q = v / v_s
+        g = F_c + (F_s - F_c) * math.exp(-q * q)
+    else:
+        g = F_c
+    v_new = (m * v + h * (F - sg * g)) / (m + h * c_v)
+    if v_new * sg < 0.0:
+        return 0.0
+    return v_new
+
+
+@njit(cache=True)
+def implicit_pressure(p, c, mdot, dmdot_dp, h):
+    """Linearly implicit Euler of ṗ = c ṁ(p) (c = n R T0 / V); returns new p."""
+    J = c * dmdot_dp
+    if J > 0.0:
+        J = 0.0
+    return p + h * c * mdot / (1.0 - h * J)
+
+
+@njit(cache=True)
+def substep(st, prm, u_l, u_r, h):
+    """Advance both axes and the sensor lags by h seconds (inputs u_l, u_r held)."""
+    pa = prm[P_PA]
+    RT = prm[P_RT]
+    n = prm[P_N]
+    C = prm[P_C1T]
+    # --- 1. spools
+    y_l = spool_step(st, prm, P_VALVE_L, S_SL, S_SDL, S_YL, u_l)
+    y_r = spool_step(st, prm, P_VALVE_R, S_SR, S_SDR, S_YR, u_r)
+    bl = P_VALVE_L
+    # --- 2. piston, Eq. 1 (errata: −A_r p_a)
+    x = st[S_X]
+    v = st[S_V]
+    p1 = st[S_PC1]
+    p2 = st[S_PC2]
+    half = 0.5 * prm[P_L]
+    F = prm[P_AC1] * p1 - prm[P_AC2] * p2 - prm[P_AR] * pa
+    if v == 0.0 and ((x >= half and F > 0.0) or (x <= -half and F < 0.0)):
+        v_new = 0.0  # held by the end stop
+    else:
+        v_new = stick_slip(v, F, prm[P_M], prm[P_AF], prm[P_FS], prm[P_VS], prm[P_CV], h)
+    x_new = x + h * v_new
+    if x_new >= half:  # inelastic end stop
+        x_new = half
+        if v_new > 0.0:
+            v_new = 0.0
+    elif x_new <= -half:
+        x_new = -half
+        if v_new < 0.0:
+            v_new = 0.0
+    # --- 3. chambers, Eq. 5 volumes, polytropic volume term exactly
+    V1o = prm[P_V1D] + prm[P_AC1] * (half + x)
+    V2o = prm[P_V2D] + prm[P_AC2] * (half - x)
+    V1 = prm[P_V1D] + prm[P_AC1] * (half + x_new)
+    V2 = prm[P_V2D] + prm[P_AC2] * (half - x_new)
+    if x_new != x:
+        p1 = p1 * (V1o / V1) ** n
+        p2 = p2 * (V2o / V2) ** n
+    # flow term (Eq. 4 with n, Eq. 11 flows), linearly implicit
+    A_s1, A_1e, A_s2, A_2e = valve_areas(prm, bl, y_l)
+    b = prm[bl + VB_B]
+    bla = prm[bl + VB_BLAM]
+    ps = prm[P_PSL]
+    mi, _d, dmi = iso_flow(ps, p1, A_s1 * C, b, bla)
+    mo, dmo, _d = iso_flow(p1, pa, A_1e * C, b, bla)
+    c1 = n * RT / V1
+    p1n = implicit_pressure(p1, c1, mi - mo, dmi - dmo, h)
+    mi, _d, dmi = iso_flow(ps, p2, A_s2 * C, b, bla)
+    mo, dmo, _d = iso_flow(p2, pa, A_2e * C, b, bla)
+    c2 = n * RT / V2
+    p2n = implicit_pressure(p2, c2, mi - mo, dmi - dmo, h)
+    st[S_MC1] += (p1n - p1) / c1
+    st[S_MC2] += (p2n - p2) / c2
+    st[S_X] = x_new
+    st[S_V] = v_new
+    st[S_PC1] = p1n
+    st[S_PC2] = p2n
+    # --- 4. motor, Eq. 7–10
+    th = st[S_TH]
+    om = st[S_OM]
+    pm1 = st[S_PM1]
+    pm2 = st[S_PM2]
+    K = vane_factor(prm, th)
+    M_m = K * (pm1 - pm2)  # Eq. 8
+    om_new = stick_slip(om, M_m, prm[P_J], prm[P_MC], prm[P_MS], 0.0, prm[P_MV], h)
+    th_new = th + h * om_new
+    K = vane_factor(prm, th_new)
+    br = P_VALVE_R
+    A_s4, A_4e, _a2, _a3 = valve_areas(prm, br, y_r)
+    b = prm[br + VB_B]
+    bla = prm[br + VB_BLAM]
+    mi, _d, dmi = iso_flow(prm[P_PSR], pm1, A_s4 * C, b, bla)
+    mo, dmo, _d = iso_flow(pm1, pa, A_4e * C, b, bla)
+    # swept displacement: gas at the upstream density crosses the motor
+    if om_new >= 0.0:
+        msw = K * om_new * pm1 / RT
+        dmsw1 = K * om_new / RT
+        dmsw2 = 0.0
+    else:
+        msw = K * om_new * pm2 / RT
+        dmsw1 = 0.0
+        dmsw2 = K * om_new / RT
+    klk = prm[P_KLK]
+    mlk = klk * (pm1 - pm2)
+    cm1 = n * RT / prm[P_VM1]
+    pm1n = implicit_pressure(pm1, cm1, mi - mo - msw - mlk, dmi - dmo - dmsw1 - klk, h)
+    if om_new >= 0.0:
+        msw = K * om_new * pm1n / RT
+    mlk = klk * (pm1n - pm2)
+    mex, dmex, _d = iso_flow(pm2, pa, prm[P_KEX], prm[br + VB_B], prm[br + VB_BLAM])
+    cm2 = n * RT / prm[P_VM2]
+    pm2n = implicit_pressure(pm2, cm2, msw + mlk - mex, dmsw2 - klk - dmex, h)
+    st[S_TH] = th_new
+    st[S_OM] = om_new
+    st[S_PM1] = pm1n
+    st[S_PM2] = pm2n
+    # --- 5. sensor lags
+    ap = prm[P_PALPHA]
+    st[S_FP1] += ap * (p1n - st[S_FP1])
+    st[S_FP2] += ap * (p2n - st[S_FP2])
+    st[S_FPM1] += ap * (pm1n - st[S_FPM1])
+    st[S_FX] += prm[P_XALPHA] * (x_new - st[S_FX])
+    st[S_T] += h
+
+
+@njit(cache=True)
+def quantise(v, rng, lsb, nmax):
+    """DAQ converter: code = round((v + rng)/lsb) clamped to [0, nmax]; returns volts."""
+    q = math.floor((v + rng) / lsb + 0.5)
+    if q < 0.0:
+        q = 0.0
+    elif q > nmax:
+        q = nmax
+    return q * lsb - rng
+
+
+@njit(cache=True)
+def ao_value(prm, u):
+    """Valve command as the AO writes it: clamp to 0..10 V, then 16-bit quantisation."""
+    if u < 0.0:  # non-finite commands are refused by Plant.step before this
+        u = 0.0
+    if u > 10.0:
+        u = 10.0
+    return quantise(u, prm[P_AOR], prm[P_AOLSB], prm[P_AONMAX])
+
+
+@njit(cache=True)
+def sample(st, prm, noise, j, out, count_prev):
+    """Sensor sample at the current tick (sample-and-hold of the lagged signals).
+
+    Pressures: gauge volts + offset + noise, clipped to the sensor's 0..v_fs, AI
+    quantised, converted back with the nominal scaling (what the driver does).
+    Laser: 0..v_fs over ±range/2, noise, AI quantised. Encoder: X4 counts of the
+    true angle; ω = Δcounts · 2π / (4 ppr T).
+    """
+    pa = prm[P_PA]
+    pfs = prm[P_PFS]
+    pvfs = prm[P_PVFS]
+    for i in range(3):
+        vv = (st[S_FP1 + i] - pa) / pfs * pvfs + prm[P_POFF + i] + prm[P_PSIG] * noise[j, i]
+        if vv < 0.0:
+            vv = 0.0
+        elif vv > pvfs:
+            vv = pvfs
+        vv = quantise(vv, prm[P_AIRP], prm[P_AILSBP], prm[P_AINMAX])
+        out[O_PC1 + i] = vv / pvfs * pfs + pa
+    rng = prm[P_XRANGE]
+    xvfs = prm[P_XVFS]
+    vv = (st[S_FX] / rng + 0.5) * xvfs + prm[P_XSIG] * noise[j, 3]
+    if vv < 0.0:
+        vv = 0.0
+    elif vv > xvfs:
+        vv = xvfs
+    vv = quantise(vv, prm[P_AIRX], prm[P_AILSBX], prm[P_AINMAX])
+    out[O_X] = (vv / xvfs - 0.5) * rng
+    cpr = prm[P_CPR]
+    cnt = math.floor(st[S_TH] * cpr / TWO_PI)
+    out[O_TH] = cnt * TWO_PI / cpr
+    out[O_OM] = (cnt - count_prev) * TWO_PI / (cpr * prm[P_T])
+    out[O_CNT] = cnt
+    st[S_CNT] = cnt
+
+
+@njit("void(f8[::1], f8[::1], f8[:, ::1], i8, f8, f8, f8[::1])", cache=True)
+def step_period(st, prm, noise, j, u_l, u_r, out):
+    """Hold the AO values for one period T (n_sub substeps), then sample the sensors."""
+    ul = ao_value(prm, u_l)
+    ur = ao_value(prm, u_r)
+    st[S_UL] = ul
+    st[S_UR] = ur
+    nsub = int(prm[P_NSUB])
+    h = prm[P_H]
+    for _ in range(nsub):
+        substep(st, prm, ul, ur, h)
+    sample(st, prm, noise, j, out, st[S_CNT])
+
+
+@njit(cache=True)
+def run_periods(st, prm, noise, u_l, u_r, out_all):
+    """Many periods in one call: u_l[k], u_r[k], noise[k] -> out_all[k, :] (open loop)."""
+    out = np.empty(N_OUT)
+    for k in range(u_l.shape[0]):
+        step_period(st, prm, noise, k, u_l[k], u_r[k], out)
+        for i in range(N_OUT):
+            out_all[k, i] = out[i]

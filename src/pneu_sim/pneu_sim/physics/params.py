@@ -1,0 +1,804 @@
+"""Plant parameters of the twin: one frozen dataclass per group, every value sourced.
+
+``config/plant.yaml`` holds the same tree; each leaf is ``{value, unit, source}``.
+:func:`load_plant` checks each unit string against the field's unit, strips the
+leaves to their values and builds :class:`PlantParams` with
+``from_dict(strict=True)``: a missing key, an unknown key, a wrong type or a value
+outside its physical range is refused with one :class:`ParamError` naming the key,
+the value and the allowed range, and nothing is half-loaded.
+
+Conventions: SI inside (m, Pa absolute, K, kg, s, rad). Two values keep the
+paper's units so Table 1 can be typed verbatim: ``rotary.M_v`` (N·m/rpm) and the
+valves' nominal flow ``Q_n`` is in m^3/s of ANR air (ISO 8778).
+
+Thermodynamics (errata Eq. 4): the paper writes T = T0 yet keeps γ. We use one
+polytropic index ``ambient.n_poly`` = 1.2 for both the flow and the volume terms,
+ṗ = n R T0 / V · (ṁ_in − ṁ_out) − n p V̇ / V, with T0 in the flow terms (the
+paper's T = T0). n = 1.2 is Richer & Hurmuzlu's (2000, JDSMC 122:416) α for the
+compression term, between isothermal (1.0) and adiabatic (1.4) as measured for
+small cylinders with heat exchange through the walls; one index keeps steady
+states consistent (zero net mass flow ⇔ constant pressure).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pneu_msgs_py.params.core import ParamError, from_dict, param, to_dict, validate
+from pneu_msgs_py.params.paths import config_file
+
+__all__ = [
+    "AmbientParams",
+    "SupplyParams",
+    "LinearParams",
+    "ValveParams",
+    "RotaryParams",
+    "PressureSensorParams",
+    "LaserParams",
+    "EncoderParams",
+    "DaqParams",
+    "SensorParams",
+    "SimParams",
+    "PlantParams",
+    "ParamError",
+    "PlantConfigError",
+    "load_plant",
+    "params_from_tree",
+    "plant_to_yaml_tree",
+    "dump_plant_yaml",
+    "MPYE_DU_V",
+    "MPYE_FLOW",
+]
+
+P_ATM = 101325.0
+
+# Festo MPYE-5 normalised flow vs |u - 5 V| (digitised from Festo's flow-vs-setpoint
+# chart, reference/plant-parameters.md).
+MPYE_DU_V = (
+    0.0, 0.36, 0.71, 0.94, 1.20, 1.43, 1.66, 1.86, 2.12, 2.47, 2.81, 3.16, 3.47, 3.81,
+    4.20, 4.62, 4.75,
+)  # fmt: skip
+MPYE_FLOW = (
+    0.0, 0.01, 0.03, 0.06, 0.11, 0.18, 0.26, 0.31, 0.40, 0.48, 0.59, 0.67, 0.74, 0.82,
+    0.90, 0.98, 1.00,
+)  # fmt: skip
+
+
+class PlantConfigError(ParamError):
+    """plant.yaml is malformed (not a {value, unit, source} leaf, unit mismatch, ...)."""
+
+
+_PLANT_SHEET = "reference/plant-parameters.md"
+
+
+@dataclass(frozen=True)
+class AmbientParams:
+    p_a: float = param(
+        P_ATM,
+        unit="Pa",
+        lo=5e4,
+        hi=1.2e5,
+        desc="ambient (atmospheric) pressure, absolute",
+        source="ISO 2533 standard atmosphere",
+    )
+    T_0: float = param(
+        300.0,
+        unit="K",
+        lo=250.0,
+        hi=350.0,
+        desc="gas and ambient temperature (paper T = T0)",
+        source="paper Table 1",
+    )
+    R: float = param(
+        287.0,
+        unit="J/(kg*K)",
+        lo=280.0,
+        hi=295.0,
+        desc="gas constant of air",
+        source="paper Table 1",
+    )
+    gamma: float = param(
+        1.4, unit="-", lo=1.0, hi=1.67, desc="ratio of specific heats", source="paper Table 1"
+    )
+    C_1: float = param(
+        0.0404,
+        unit="sqrt(K)*s/m",
+        lo=0.03,
+        hi=0.05,
+        desc="ISO 6358 flow constant sqrt((γ/R)(2/(γ+1))^((γ+1)/(γ-1)))",
+        source="paper Table 1 ('c_1'; errata: it is the flow constant)",
+    )
+    n_poly: float = param(
+        1.2,
+        unit="-",
+        lo=1.0,
+        hi=1.4,
+        desc="polytropic index of the chamber process (flow and volume terms)",
+        source="Richer & Hurmuzlu 2000 (α ≈ 1.2); paper's γ with T = T0 is inconsistent (errata Eq. 4)",
+    )
+
+    def _check(self) -> None:
+        c1 = (
+            math.sqrt(
+                (self.gamma / self.R)
+                * (2.0 / (self.gamma + 1.0)) ** ((self.gamma + 1.0) / (self.gamma - 1.0))
+            )
+            if self.gamma > 1.0
+            else float("nan")
+        )
+        if not (abs(self.C_1 - c1) <= 0.01 * c1):
+            raise ParamError("C_1", self.C_1, f"within 1 % of {c1:.5g} (from gamma and R)")
+
+
+@dataclass(frozen=True)
+class SupplyParams:
+    p_s_linear: float = param(
+        0.2e6 + P_ATM,
+        unit="Pa",
+        lo=1.2e5,
+        hi=1.1e6,
+        desc="supply of the linear valve, absolute",
+        source="paper: 0.2 MPa, read as gauge (a regulator setting is a gauge reading) + p_a",
+    )
+    p_s_rotary: float = param(
+        0.4e6 + P_ATM,
+        unit="Pa",
+        lo=1.2e5,
+        hi=1.1e6,
+        desc="supply of the rotary valve, absolute",
+        source="paper: 0.4 MPa, read as gauge (a regulator setting is a gauge reading) + p_a",
+    )
+
+
+@dataclass(frozen=True)
+class LinearParams:
+    A_c1: float = param(
+        8.04e-4,
+        unit="m^2",
+        lo=0.0,
+        lo_open=True,
+        hi=1e-2,
+        desc="piston area, cap side (chamber 1)",
+        source="paper Table 1 (Ø32 bore)",
+    )
+    A_c2: float = param(
+        6.912e-4,
+        unit="m^2",
+        lo=0.0,
+        lo_open=True,
+        hi=1e-2,
+        desc="annulus area, rod side (chamber 2)",
+        source="paper Table 1 (Ø32 bore, Ø12 rod)",
+    )
+    V_1d: float = param(
+        1.1e-5,
+        unit="m^3",
+        lo=0.0,
+        lo_open=True,
+        hi=1e-3,
+        desc="dead volume chamber 1 (incl. tubing)",
+        source="paper Table 1",
+    )
+    V_2d: float = param(
+        0.6e-5,
+        unit="m^3",
+        lo=0.0,
+        lo_open=True,
+        hi=1e-3,
+        desc="dead volume chamber 2 (incl. tubing)",
+        source="paper Table 1",
+    )
+    M: float = param(
+        0.28,
+        unit="kg",
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+        desc="moving mass (piston, rods, load)",
+        source="paper Table 1",
+    )
+    L: float = param(
+        0.15,
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+        hi=2.0,
+        desc="stroke; end stops at ±L/2",
+        source="paper Table 1 (DSBC-32-150)",
+    )
+    A_f: float = param(
+        2.95,
+        unit="N",
+        lo=0.0,
+        hi=200.0,
+        desc="sliding (Coulomb) friction level of Eq. 2",
+        source="paper Eq. 2 fit",
+    )
+    c_v: float = param(
+        88.81,
+        unit="N*s/m",
+        lo=0.0,
+        hi=1e4,
+        desc="viscous friction coefficient of Eq. 2",
+        source="paper Eq. 2 fit",
+    )
+    breakaway_ratio: float = param(
+        1.5,
+        unit="-",
+        lo=1.0,
+        hi=3.0,
+        desc="static (breakaway) friction / A_f",
+        source="estimated: middle of the 1.3-2x range for elastomer (PPV) piston seals quoted in DESIGN §8; no DSBC-32 measurement found",
+    )
+    v_s: float = param(
+        0.01,
+        unit="m/s",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+        desc="Stribeck velocity of the breakaway bump",
+        source="estimated: order of 10 mm/s typical of lubricated pneumatic cylinder seals",
+    )
+
+    def _check(self) -> None:
+        if not self.A_c2 < self.A_c1:
+            raise ParamError(
+                "A_c2", self.A_c2, f"(0, A_c1 = {self.A_c1:g}) m^2 (rod side is the annulus)"
+            )
+
+    @property
+    def A_r(self) -> float:
+        """Rod area A_c1 - A_c2 (errata Eq. 1: the rod sees p_a on it)."""
+        return self.A_c1 - self.A_c2
+
+
+@dataclass(frozen=True)
+class ValveParams:
+    Q_n: float = param(
+        350.0 / 60000.0,
+        unit="m^3/s",
+        lo=0.0,
+        lo_open=True,
+        hi=0.1,
+        desc="nominal flow (ANR) at p_n_up -> p_n_down, fully open",
+        source="Festo MPYE-5-1/8-LF: 350 l/min (6 -> 5 bar gauge)",
+    )
+    p_n_up: float = param(
+        6e5 + P_ATM,
+        unit="Pa",
+        lo=1e5,
+        hi=2e6,
+        desc="upstream pressure of the nominal-flow test, absolute",
+        source="ISO 6358 nominal condition 6 bar gauge",
+    )
+    p_n_down: float = param(
+        5e5 + P_ATM,
+        unit="Pa",
+        lo=1e5,
+        hi=2e6,
+        desc="downstream pressure of the nominal-flow test, absolute",
+        source="ISO 6358 nominal condition 5 bar gauge",
+    )
+    T_n: float = param(
+        293.15,
+        unit="K",
+        lo=250.0,
+        hi=350.0,
+        desc="temperature of the nominal-flow test",
+        source="ISO 8778 (ANR, 20 °C)",
+    )
+    rho_n: float = param(
+        1.185,
+        unit="kg/m^3",
+        lo=1.0,
+        hi=1.4,
+        desc="density of ANR air",
+        source="ISO 8778 (100 kPa, 20 °C, 65 % RH)",
+    )
+    b: float = param(
+        0.29,
+        unit="-",
+        lo=0.0,
+        lo_open=True,
+        hi=0.528,
+        desc="critical pressure ratio",
+        source="paper Table 1",
+    )
+    b_lam: float = param(
+        0.999,
+        unit="-",
+        lo=0.9,
+        hi=0.99999,
+        desc="pressure ratio where the laminar (linear) patch starts",
+        source="MathWorks Pneumatic Orifice (ISO 6358) default 0.999 (errata Eq. 11)",
+    )
+    du_table: tuple[float, ...] = param(
+        MPYE_DU_V,
+        unit="V",
+        desc="|u - 5 V| breakpoints of the opening curve",
+        source="Festo MPYE flow-vs-setpoint chart, digitised (" + _PLANT_SHEET + ")",
+    )
+    flow_table: tuple[float, ...] = param(
+        MPYE_FLOW,
+        unit="-",
+        desc="normalised flow (= area fraction) at du_table",
+        source="Festo MPYE flow-vs-setpoint chart, digitised (" + _PLANT_SHEET + ")",
+    )
+    leak_fraction: float = param(
+        0.01,
+        unit="-",
+        lo=0.0,
+        hi=0.1,
+        desc="centre leakage area per path / max area (fades out on the closing paths over the first table step)",
+        source="estimated: gives ≈ 9 l/min ANR at 6 bar with ports blocked, under the datasheet maximum of 20 l/min (LF)",
+    )
+    hysteresis: float = param(
+        0.04,
+        unit="V",
+        lo=0.0,
+        hi=1.0,
+        desc="spool hysteresis (play) width",
+        source="Festo MPYE catalogue: ≤ 0.4 % of max stroke (10 V span)",
+    )
+    omega_n: float = param(
+        2.0 * math.pi * 95.0,
+        unit="rad/s",
+        lo=1.0,
+        hi=1e4,
+        desc="spool natural frequency (2nd order)",
+        source="Festo MPYE-5-1/8: -3 dB limit frequency ≈ 95 Hz (" + _PLANT_SHEET + ")",
+    )
+    zeta: float = param(
+        0.7,
+        unit="-",
+        lo=0.05,
+        hi=5.0,
+        desc="spool damping ratio",
+        source="estimated (" + _PLANT_SHEET + ")",
+    )
+
+    def _check(self) -> None:
+        if self.p_n_down >= self.p_n_up:
+            raise ParamError("p_n_down", self.p_n_down, f"< p_n_up = {self.p_n_up:g} Pa")
+        if self.b_lam <= self.b:
+            raise ParamError("b_lam", self.b_lam, f"(b = {self.b:g}, 1)")
+        du, fl = self.du_table, self.flow_table
+        if len(du) < 2 or len(du) != len(fl):
+            raise ParamError(
+                "flow_table", list(fl), f"{len(du)} values, one per du_table entry (>= 2)"
+            )
+        if du[0] != 0.0 or any(b <= a for a, b in itertools.pairwise(du)) or du[-1] > 5.0:
+            raise ParamError("du_table", list(du), "strictly increasing from 0 to at most 5 V")
+        if fl[0] != 0.0 or fl[-1] != 1.0 or any(b < a for a, b in itertools.pairwise(fl)):
+            raise ParamError("flow_table", list(fl), "non-decreasing from 0 to 1")
+
+
+@dataclass(frozen=True)
+class RotaryParams:
+    R_m: float = param(
+        0.019,
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+        hi=0.2,
+        desc="stator bore radius (Eq. 6)",
+        source="estimated ("
+        + _PLANT_SHEET
+        + "), checked against the 1AM's published free speed and power (test_sim_motor)",
+    )
+    r_m: float = param(
+        0.0165,
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+        hi=0.2,
+        desc="rotor radius (Eq. 6)",
+        source="estimated (" + _PLANT_SHEET + ")",
+    )
+    L_m: float = param(
+        0.021,
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+        hi=0.5,
+        desc="vane length (Eq. 8)",
+        source="estimated: sets the sector-mean Eq. 8 factor K = 1.87e-6 m^3 so that K * 100 psi = 1.29 N*m"
+        " = 4 P_max / omega_free, the stall torque of a linear torque-speed line through Gast 1AM's"
+        " 0.45 hp and 10 000 rpm at 100 psi (the sheet's 25 mm ignores the 2 d R cos term of Eq. 8)",
+    )
+    n_vanes: int = param(
+        4,
+        unit="-",
+        lo=2,
+        hi=16,
+        desc="number of vanes (torque ripple period 2π/n)",
+        source="Gast 1AM product data (4 vanes)",
+    )
+    J_m: float = param(
+        3.5e-5,
+        unit="kg*m^2",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+        desc="rotor + coupling + rod + piston inertia",
+        source="estimated ±50 % (" + _PLANT_SHEET + ")",
+    )
+    M_c: float = param(
+        0.1281,
+        unit="N*m",
+        lo=0.0,
+        hi=10.0,
+        desc="Coulomb friction torque (Eq. 9)",
+        source="paper Eq. 9 fit",
+    )
+    M_v: float = param(
+        8.66e-5,
+        unit="N*m/rpm",
+        lo=0.0,
+        hi=0.1,
+        desc="viscous friction torque per rpm (Eq. 9)",
+        source="paper Eq. 9 fit (per r/min, = 8.27e-4 N·m·s/rad)",
+    )
+    static_ratio: float = param(
+        1.0,
+        unit="-",
+        lo=1.0,
+        hi=3.0,
+        desc="static friction torque / M_c (Eq. 10: f(0) = 0 read as sticking up to M_c)",
+        source="paper Eq. 10 (no breakaway measured)",
+    )
+    V_m1: float = param(
+        1.4e-5,
+        unit="m^3",
+        lo=0.0,
+        lo_open=True,
+        hi=1e-3,
+        desc="inlet chamber + tubing volume",
+        source="estimated (" + _PLANT_SHEET + ")",
+    )
+    V_m2: float = param(
+        1.0e-5,
+        unit="m^3",
+        lo=0.0,
+        lo_open=True,
+        hi=1e-3,
+        desc="exhaust chamber + port volume",
+        source="estimated: exhaust-side cells and port of a 1AM-size motor",
+    )
+    A_ex: float = param(
+        1.5e-5,
+        unit="m^2",
+        lo=0.0,
+        lo_open=True,
+        hi=1e-3,
+        desc="silencer orifice area (ISO 6358 with Eq. 12 C_d, b as valve)",
+        source="estimated: 1/8 NPT exhaust port (≈ 7 mm bore, 38 mm^2) throttled by a sintered silencer to ≈ 40 %",
+    )
+    k_leak: float = param(
+        5e-10,
+        unit="kg/(s*Pa)",
+        lo=0.0,
+        hi=1e-6,
+        desc="vane/side leakage inlet -> exhaust, laminar",
+        source="estimated: 5e-5 kg/s (≈ 2.5 l/min ANR) at 1 bar, ≈ 15 % of the 800 rpm consumption",
+    )
+
+    def _check(self) -> None:
+        if not self.r_m < self.R_m:
+            raise ParamError("r_m", self.r_m, f"(0, R_m = {self.R_m:g}) m")
+
+    @property
+    def d_m(self) -> float:
+        """Eccentricity d_m = R_m - r_m (Eq. 6)."""
+        return self.R_m - self.r_m
+
+    @property
+    def M_v_si(self) -> float:
+        """M_v in N·m·s/rad."""
+        return self.M_v * 60.0 / (2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class PressureSensorParams:
+    fs: float = param(
+        1.0e6,
+        unit="Pa",
+        lo=1e4,
+        hi=1e8,
+        desc="full scale (gauge) of the Huba 511",
+        source="Huba 511.930002741: 0-10 bar relative",
+    )
+    v_fs: float = param(
+        10.0,
+        unit="V",
+        lo=0.1,
+        hi=10.0,
+        desc="output at full scale",
+        source="Huba 511: 0-10 V output",
+    )
+    accuracy_fs: float = param(
+        0.005,
+        unit="-",
+        lo=0.0,
+        hi=0.1,
+        desc="static accuracy / FS; each sensor gets a fixed offset drawn uniformly in ±accuracy from the seed",
+        source="Huba 511: ±0.5 % FS (" + _PLANT_SHEET + ", UNV)",
+    )
+    sigma_v: float = param(
+        0.002,
+        unit="V",
+        lo=0.0,
+        hi=1.0,
+        desc="output noise (1 σ)",
+        source="estimated: Huba gives no noise figure; 2 mV rms on 10 V is typical of amplified piezoresistive sensors",
+    )
+    tau: float = param(
+        2.3e-3,
+        unit="s",
+        lo=0.0,
+        lo_open=True,
+        hi=0.1,
+        desc="first-order time constant",
+        source="Huba 511: response < 5 ms read as 10-90 % rise, τ = 5 ms / 2.2",
+    )
+
+
+@dataclass(frozen=True)
+class LaserParams:
+    range_m: float = param(
+        0.16,
+        unit="m",
+        lo=0.01,
+        hi=1.0,
+        desc="measuring span (200 ± 80 mm), centred on x = 0",
+        source="Panasonic HG-C1200 datasheet",
+    )
+    v_fs: float = param(
+        5.0,
+        unit="V",
+        lo=0.1,
+        hi=10.0,
+        desc="analog output at full span (0-5 V)",
+        source="Panasonic HG-C1200 datasheet",
+    )
+    tau: float = param(
+        0.68e-3,
+        unit="s",
+        lo=0.0,
+        lo_open=True,
+        hi=0.1,
+        desc="first-order time constant at the chosen response setting (1.5 ms)",
+        source="HG-C1200 response 1.5 ms read as 10-90 % rise, τ = 1.5 ms / 2.2",
+    )
+    sigma_m: float = param(
+        86e-6,
+        unit="m",
+        lo=0.0,
+        hi=0.01,
+        desc="displacement noise (1 σ) at the 1.5 ms setting",
+        source="estimated: repeatability 200 µm at the slowest (10 ms) setting read as ±3σ → 33 µm; × sqrt(10/1.5) for the 1.5 ms setting",
+    )
+
+
+@dataclass(frozen=True)
+class EncoderParams:
+    ppr: int = param(
+        1000,
+        unit="1/rev",
+        lo=1,
+        hi=100000,
+        desc="pulses per revolution (one channel); X4 decoding gives 4·ppr counts",
+        source="Omron E6B2-CWZ6C 1000 P/R variant (paper names the series only)",
+    )
+
+
+@dataclass(frozen=True)
+class DaqParams:
+    ai_bits: int = param(
+        16, unit="bit", lo=8, hi=24, desc="AI resolution", source="NI PCI-6221: 16-bit AI"
+    )
+    ai_range_pressure: float = param(
+        10.0,
+        unit="V",
+        lo=0.1,
+        hi=10.0,
+        desc="AI range ± of the pressure channels",
+        source="NI PCI-6221 ranges ±10/5/1/0.2 V; ±10 V covers 0-10 V",
+    )
+    ai_range_laser: float = param(
+        5.0,
+        unit="V",
+        lo=0.1,
+        hi=10.0,
+        desc="AI range ± of the laser channel",
+        source="NI PCI-6221 ranges; ±5 V covers the laser's 0-5 V",
+    )
+    ao_bits: int = param(
+        16, unit="bit", lo=8, hi=24, desc="AO resolution", source="NI PCI-6221: 16-bit AO"
+    )
+    ao_range: float = param(
+        10.0,
+        unit="V",
+        lo=1.0,
+        hi=10.0,
+        desc="AO range ± (commands clamped to 0-10 V)",
+        source="NI PCI-6221: ±10 V AO",
+    )
+
+
+@dataclass(frozen=True)
+class SensorParams:
+    pressure: PressureSensorParams = param(PressureSensorParams)
+    laser: LaserParams = param(LaserParams)
+    encoder: EncoderParams = param(EncoderParams)
+    daq: DaqParams = param(DaqParams)
+
+
+@dataclass(frozen=True)
+class SimParams:
+    T: float = param(
+        1e-3,
+        unit="s",
+        lo=1e-5,
+        hi=0.1,
+        desc="sample period (DAQ clock)",
+        source="paper: 1 ms sampling",
+        read_only=True,
+    )
+    n_sub: int = param(
+        10,
+        unit="-",
+        lo=1,
+        hi=1000,
+        desc="integration substeps per sample period",
+        source="chosen: step-size convergence shown in test_sim_integrator",
+    )
+    noise_block: int = param(
+        1000,
+        unit="-",
+        lo=1,
+        hi=1000000,
+        desc="samples of sensor noise drawn per refill of the seeded generator",
+        source="chosen (speed); results do not depend on it",
+    )
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """The whole twin. Groups: ambient, supply, linear, valve_linear, valve_rotary, rotary, sensors, sim."""
+
+    ambient: AmbientParams = param(AmbientParams)
+    supply: SupplyParams = param(SupplyParams)
+    linear: LinearParams = param(LinearParams)
+    valve_linear: ValveParams = param(ValveParams)
+    valve_rotary: ValveParams = param(ValveParams)
+    rotary: RotaryParams = param(RotaryParams)
+    sensors: SensorParams = param(SensorParams)
+    sim: SimParams = param(SimParams)
+
+    def _check(self) -> None:
+        p_a = self.ambient.p_a
+        for key in ("p_s_linear", "p_s_rotary"):
+            v = getattr(self.supply, key)
+            if v <= p_a:
+                raise ParamError(f"supply.{key}", v, f"> ambient.p_a = {p_a:g} Pa")
+
+
+# --------------------------------------------------------------------------- YAML
+
+
+def _leaf_meta(cls: type) -> dict[str, dataclasses.Field]:
+    return {f.name: f for f in dataclasses.fields(cls)}
+
+
+def _strip(cls: type, tree: Any, prefix: str) -> dict[str, Any]:
+    """{value, unit, source} leaves -> values, checking units; structure errors named."""
+    if not isinstance(tree, Mapping):
+        raise PlantConfigError(prefix.rstrip(".") or "plant", tree, "a mapping of parameters")
+    fields = _leaf_meta(cls)
+    hints = typing.get_type_hints(cls)
+    out: dict[str, Any] = {}
+    for key, node in tree.items():
+        f = fields.get(key)
+        name = f"{prefix}{key}"
+        if f is None:
+            raise PlantConfigError(name, node, "no such parameter; known: " + ", ".join(fields))
+        tp = hints[key]
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+            out[key] = _strip(tp, node, f"{name}.")
+            continue
+        if not isinstance(node, Mapping) or "value" not in node:
+            raise PlantConfigError(name, node, "a leaf {value: ..., unit: ..., source: ...}")
+        extra = set(node) - {"value", "unit", "source"}
+        if extra:
+            raise PlantConfigError(name, dict(node), "leaf keys value, unit, source only")
+        unit = f.metadata.get("unit", "")
+        if node.get("unit", "") != unit:
+            raise PlantConfigError(f"{name}.unit", node.get("unit"), f"'{unit}'")
+        src = node.get("source", "")
+        if not isinstance(src, str) or not src.strip():
+            raise PlantConfigError(f"{name}.source", src, "a non-empty string naming the source")
+        out[key] = node["value"]
+    for key, f in fields.items():
+        if key not in out:
+            tp = hints[key]
+            if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+                need = "required: the parameter group " + ", ".join(_leaf_meta(tp))
+            else:
+                unit = f.metadata.get("unit", "")
+                need = f"required: a leaf {{value, unit: '{unit}', source}}"
+            raise PlantConfigError(f"{prefix}{key}", None, need)
+    return out
+
+
+def params_from_tree(tree: Mapping[str, Any]) -> PlantParams:
+    """Build PlantParams from a plant.yaml tree (strict)."""
+    return from_dict(PlantParams, _strip(PlantParams, tree, ""), strict=True)
+
+
+def load_plant(path: str | Path | None = None) -> PlantParams:
+    """Load and validate ``plant.yaml`` (default: the project's ``config/plant.yaml``)."""
+    import yaml
+
+    path = Path(path) if path is not None else config_file("plant.yaml")
+    with open(path, encoding="utf-8") as fh:
+        try:
+            tree = yaml.safe_load(fh)
+        except yaml.YAMLError as err:
+            raise PlantConfigError(str(path), "unparsable YAML", f"valid YAML ({err})") from None
+    return params_from_tree(tree if tree is not None else {})
+
+
+def plant_to_yaml_tree(p: Any) -> dict[str, Any]:
+    """PlantParams -> {value, unit, source} tree (sources from the field metadata)."""
+    out: dict[str, Any] = {}
+    values = to_dict(p)
+    for f in dataclasses.fields(p):
+        v = getattr(p, f.name)
+        if dataclasses.is_dataclass(v):
+            out[f.name] = plant_to_yaml_tree(v)
+        else:
+            out[f.name] = {
+                "value": values[f.name],
+                "unit": f.metadata.get("unit", ""),
+                "source": f.metadata.get("source", "") or "-",
+            }
+    return out
+
+
+def dump_plant_yaml(p: PlantParams | None = None) -> str:
+    """YAML text of ``p`` (default: the built-in values) with a comment per leaf."""
+    import yaml
+
+    p = validate(p if p is not None else PlantParams())
+    lines = [
+        "# Plant of the linear-rotary pneumatic actuator twin (pneu_sim).",
+        "# Each leaf: value, unit (must match the code), source (paper table, datasheet,",
+        "# or 'estimated: why'). SI units, pressures absolute, except rotary.M_v (N*m/rpm, as",
+        "# Table 1). Generated from pneu_sim.physics.params.PlantParams defaults; edit values freely.",
+    ]
+
+    def emit(tree: Mapping[str, Any], indent: str) -> None:
+        for key, node in tree.items():
+            if "value" in node and isinstance(node.get("unit"), str):
+                leaf = yaml.safe_dump(
+                    dict(node),
+                    default_flow_style=True,
+                    allow_unicode=True,
+                    width=10_000,
+                    sort_keys=False,
+                ).strip()
+                lines.append(f"{indent}{key}: {leaf}")
+            else:
+                lines.append(f"{indent}{key}:")
+                emit(node, indent + "  ")
+
+    emit(plant_to_yaml_tree(p), "")
+    return "\n".join(lines) + "\n"
