@@ -424,4 +424,6 @@ def test_reference_argument_becomes_typed_reference_parameters():
 def test_param_types_helper_sees_dataclass_fields():
     types_ = _node_param_types("pneu_control", "linear_controller")
     assert types_["eso_smc.epsilon"] is float and "controllers_file" in types_
-    assert dataclasses.is_dataclass(__import__("pneu_sim.nodes.sim_core").nodes.sim_core.SimNodeParams)
+    assert dataclasses.is_dataclass(
+        __import__("pneu_sim.nodes.sim_core").nodes.sim_core.SimNodeParams
+    )
