@@ -71,3 +71,23 @@ def test_describe_specs():
     specs = {s.name: s for s in describe(Outer)}
     assert specs["inner.epsilon"].lo == 0.0 and "mm/s^3" in specs["inner.epsilon"].description
     assert specs["algorithm"].choices == ("pid", "ladrc", "eso_smc")
+
+
+def test_one_spec_parser_for_references_faults_and_launch_arguments():
+    from pneu_msgs_py.params.spec import parse_spec, parse_value
+
+    assert parse_spec("sine:amplitude=20,frequency_hz=0.25", "--reference") == (
+        "sine",
+        {"amplitude": 20, "frequency_hz": 0.25},
+    )
+    assert parse_spec(" constant ", "--reference") == ("constant", {})
+    assert parse_value("3e5") == 3e5 and parse_value("pid") == "pid" and parse_value("1") == 1
+    for text, msg in (
+        ("sine:amplitude=20,amplitude=5", "--reference sine: 'amplitude' refused; allowed: each key once"),
+        ("sine:amplitude", "--reference sine: 'amplitude' refused; allowed: key=value"),
+        ("sine:=3", "--reference sine: '=3' refused; allowed: key=value"),
+        (":amplitude=3", "--reference: ':amplitude=3' refused; allowed: KIND[:key=value,...] with a KIND"),
+    ):  # fmt: skip
+        with pytest.raises(ParamError) as err:
+            parse_spec(text, "--reference")
+        assert str(err.value) == msg

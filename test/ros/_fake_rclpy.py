@@ -318,6 +318,9 @@ class Node:
         WORLD.nodes.append(self)
 
     # -- parameters
+    def has_parameter(self, name):
+        return name in self._params
+
     def declare_parameter(self, name, value=None, descriptor=None):
         return self.declare_parameters("", [(name, value, descriptor or ParameterDescriptor())])[0]
 
@@ -495,6 +498,9 @@ class SingleThreadedExecutor:
 
     def spin(self):
         raise ExternalShutdownException  # nothing to wait for in tests: behave like Ctrl-C
+
+    def shutdown(self, timeout_sec=None):
+        self.nodes = []
 
 
 def _modules() -> dict[str, types.ModuleType]:

@@ -291,23 +291,23 @@ def _run_launch(path: Path, overrides: dict[str, str]) -> list[_Action]:
     try:
         ns = runpy.run_path(str(path))
         entities = ns["generate_launch_description"]()
+        args = {e.args[0]: e for e in entities if type(e).__name__ == "DeclareLaunchArgument"}
+        context = {name: a.kwargs["default_value"] for name, a in args.items()}
+        for k, v in overrides.items():
+            assert k in args, f"{path.name}: no launch argument {k}"
+            choices = args[k].kwargs.get("choices")
+            assert choices is None or v in choices
+            context[k] = v
+        nodes = []
+        for e in entities:
+            if type(e).__name__ == "OpaqueFunction":
+                nodes.extend(e.kwargs["function"](context))
     finally:
         for k, v in saved.items():
             if v is None:
                 sys.modules.pop(k, None)
             else:
                 sys.modules[k] = v
-    args = {e.args[0]: e for e in entities if type(e).__name__ == "DeclareLaunchArgument"}
-    context = {name: a.kwargs["default_value"] for name, a in args.items()}
-    for k, v in overrides.items():
-        assert k in args, f"{path.name}: no launch argument {k}"
-        choices = args[k].kwargs.get("choices")
-        assert choices is None or v in choices
-        context[k] = v
-    nodes = []
-    for e in entities:
-        if type(e).__name__ == "OpaqueFunction":
-            nodes.extend(e.kwargs["function"](context))
     return nodes
 
 

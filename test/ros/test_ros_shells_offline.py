@@ -284,3 +284,45 @@ def test_sim_open_loop_lockstep_runs_to_its_duration(world):
     ex.spin_until_future_complete(sim.done, timeout_sec=60.0)
     assert sim.done.result()["steps"] == 199
     assert sim.core.held == {"linear": 5.0, "rotary": 5.0}
+
+
+def test_run_node_spins_to_the_end_and_leaves_the_rig_safe(world, capsys, monkeypatch):
+    """The one main(): executor chosen (no EventsExecutor in the fake: 'auto' -> single), spin
+    until the node's done future, safe_shutdown, exit 0."""
+    world.overrides["/pneu_sim"] = {
+        "mode": "lockstep",
+        "axes": "none",
+        "duration_s": 0.05,
+        "lockstep.min_subscribers": 0,
+        "lockstep.settle_s": 0.0,
+    }
+    import pneu_sim.nodes.sim_node as sn
+
+    shut = []
+    monkeypatch.setattr(
+        sn.SimNode,
+        "safe_shutdown",
+        lambda self: shut.append((self.core.sample.k, self.get_parameter("executor").value)),
+    )
+    assert sn.main() == 0
+    assert shut == [(49, "")]  # after the last sample, once; the executor parameter declared
+
+
+@pytest.mark.parametrize(
+    ("env", "message"),
+    [("bogus", "executor: 'bogus' refused; allowed: one of auto, events, single"),
+     ("events", "executor: 'events' refused; this rclpy has no rclpy.experimental.EventsExecutor")],
+)  # fmt: skip
+def test_run_node_refuses_an_executor_it_cannot_give_in_one_line(
+    world, capsys, monkeypatch, env, message
+):
+    world.overrides["/pneu_sim"] = {"mode": "lockstep", "axes": "none", "duration_s": 0.05}
+    monkeypatch.setenv("PNEU_EXECUTOR", env)
+    import pneu_sim.nodes.sim_node as sn
+
+    shut = []
+    monkeypatch.setattr(sn.SimNode, "safe_shutdown", lambda self: shut.append(True))
+    assert sn.main() == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("sim_node: error: " + message)
+    assert shut == [True]  # the node was built: it is still left safe

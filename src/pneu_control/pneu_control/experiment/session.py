@@ -14,28 +14,14 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pneu_msgs_py.params.core import ParamError, to_dict
+from pneu_msgs_py.params.spec import parse_spec, parse_value
 
 from pneu_control.analysis.metrics import WindowSpec
 from pneu_control.controller.params import load_controller_params
 from pneu_control.experiment.runner import RunResult, RunSpec, run
 
 __all__ = ["build_spec", "execute", "parse_reference", "parse_sets", "window_for"]
-
-
-def parse_value(text: str) -> Any:
-    """A CLI value as YAML would read it (``1`` int, ``1.0`` float, ``pid`` str).
-
-    YAML 1.1 reads ``3e5`` as a string; a user means the number.
-    """
-    value = yaml.safe_load(text)
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return value
 
 
 def parse_sets(items: Iterable[str], axes: tuple[str, ...]) -> dict[str, dict[str, Any]]:
@@ -62,14 +48,8 @@ def parse_reference(text: str | None) -> dict[str, Any]:
     """``sine:amplitude=20,frequency_hz=0.25`` -> dotted ``reference.*`` overrides."""
     if not text:
         return {}
-    kind, _, rest = text.partition(":")
-    out: dict[str, Any] = {"reference.kind": kind.strip()}
-    for part in filter(None, (p.strip() for p in rest.split(","))):
-        key, sep, value = part.partition("=")
-        if not sep:
-            raise ValueError(f"--reference: {part!r} refused; allowed: key=value")
-        out[f"reference.{key.strip()}"] = parse_value(value)
-    return out
+    kind, values = parse_spec(text, "--reference")
+    return {"reference.kind": kind, **{f"reference.{k}": v for k, v in values.items()}}
 
 
 def rotary_average_s(speed_rpm: float) -> float:

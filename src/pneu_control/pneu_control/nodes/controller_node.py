@@ -12,10 +12,8 @@ applied after (post-set), and takes effect at the next sample, bumplessly.
 
 from __future__ import annotations
 
-import signal
 import sys
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pneu_msgs_py.contract.convert import fill_diagnostic_array, fill_valve_command
 from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
@@ -25,6 +23,7 @@ from pneu_msgs_py.contract.topics import (
     VALVE_COMMAND_TOPIC,
     qos_for,
 )
+from pneu_msgs_py.nodes.run import ShellDefaults, run_node
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.ros import coerce_value, declarations, specs_by_name, validate_updates
 from rcl_interfaces.msg import (
@@ -35,8 +34,6 @@ from rcl_interfaces.msg import (
 )
 from rclpy import qos as rq
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import FluidPressure, JointState
@@ -46,7 +43,7 @@ from pneu_control.controller.params import load_controller_params
 from pneu_control.nodes.controller_core import SENSOR_TOPICS, ControllerShellCore
 
 
-class ControllerNode(Node):
+class ControllerNode(ShellDefaults, Node):
     def __init__(self, axis: str, **node_kwargs):
         super().__init__(f"{axis}_controller", **node_kwargs)
         self.axis = axis
@@ -156,6 +153,12 @@ class ControllerNode(Node):
             fill_diagnostic_array(DiagnosticArray(), DiagnosticStatus, KeyValue, now, statuses)
         )
 
+    def safe_shutdown(self) -> None:
+        try:
+            self.publish_neutral()
+        except Exception:  # context already shut down by the signal: the driver's watchdog acts
+            pass
+
     def publish_neutral(self) -> None:
         """Last word: the neutral command for the last answered sample (driver writes 5 V now)."""
         if self.core.last_stamp_ns >= 0:
@@ -165,55 +168,12 @@ class ControllerNode(Node):
             )
 
 
-def make_executor():
-    """rclpy's EventsExecutor where this rclpy has it (Jazzy >= 7.1.4), else SingleThreadedExecutor."""
-    try:
-        from rclpy.experimental import EventsExecutor
-
-        return EventsExecutor()
-    except ImportError:
-        from rclpy.executors import SingleThreadedExecutor
-
-        return SingleThreadedExecutor()
-
-
-def _main(axis: str, args=None) -> int:
-    rclpy.init(args=args)
-    node = None
-    code = 0
-    try:
-        node = ControllerNode(axis)
-        executor = make_executor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException, OSError) as err:
-        print(f"{axis}_controller: error: {err}", file=sys.stderr)
-        code = 1
-    finally:
-        # Ctrl-C reaches a launched node twice (the terminal's process group, then
-        # launch's forward): the second SIGINT must not cut the cleanup short.
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            if node is not None:
-                try:
-                    node.publish_neutral()
-                except Exception:  # context already shut down by the signal: the watchdog acts
-                    pass
-                node.destroy_node()
-            rclpy.try_shutdown()
-        finally:
-            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
-    return code
-
-
 def main_linear(args=None) -> int:
-    return _main("linear", args)
+    return run_node("linear_controller", lambda: ControllerNode("linear"), args)
 
 
 def main_rotary(args=None) -> int:
-    return _main("rotary", args)
+    return run_node("rotary_controller", lambda: ControllerNode("rotary"), args)
 
 
 if __name__ == "__main__":

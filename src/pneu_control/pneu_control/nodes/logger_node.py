@@ -12,20 +12,17 @@ file. Output: ``<out>/<bag_name>``.
 from __future__ import annotations
 
 import dataclasses
-import signal
 import sys
 from pathlib import Path
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pneu_msgs_py.contract.convert import DiagStatus, fill_diagnostic_array
 from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
 from pneu_msgs_py.contract.topics import DIAGNOSTICS_TOPIC, qos_for
+from pneu_msgs_py.nodes.run import ShellDefaults, run_node
 from rcl_interfaces.msg import ParameterDescriptor, ParameterEvent
 from rclpy import qos as rq
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
@@ -42,7 +39,7 @@ _TYPES = {
 }
 
 
-class LoggerNode(Node):
+class LoggerNode(ShellDefaults, Node):
     def __init__(self, **node_kwargs):
         super().__init__("logger", **node_kwargs)
         ro = {"read_only": True}
@@ -109,6 +106,10 @@ class LoggerNode(Node):
         self.create_timer(1.0, self._diagnostics, clock=steady)
         self.get_logger().info(f"logging to {self.path} ({mode})")
 
+    def safe_shutdown(self) -> None:
+        self.core.close()  # metadata, summary, footer: the bag is complete
+        print(f"logger: wrote {self.path}", file=sys.stderr)
+
     # -- parameters of the graph -------------------------------------------
     def _discover(self) -> None:
         me = self.get_fully_qualified_name()
@@ -159,39 +160,7 @@ class LoggerNode(Node):
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    node = None
-    code = 0
-    try:
-        node = LoggerNode()
-        try:
-            from rclpy.experimental import EventsExecutor
-
-            executor = EventsExecutor()
-        except ImportError:
-            from rclpy.executors import SingleThreadedExecutor
-
-            executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException, OSError) as err:
-        print(f"logger: error: {err}", file=sys.stderr)
-        code = 1
-    finally:
-        # Ctrl-C reaches a launched node twice (the terminal's process group, then
-        # launch's forward): the second SIGINT must not cut the cleanup short.
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            if node is not None:
-                node.core.close()  # metadata, summary, footer: the bag is complete
-                print(f"logger: wrote {node.path}", file=sys.stderr)
-                node.destroy_node()
-            rclpy.try_shutdown()
-        finally:
-            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
-    return code
+    return run_node("logger", LoggerNode, args)
 
 
 if __name__ == "__main__":

@@ -14,11 +14,9 @@ devices visible, exit status 1.
 from __future__ import annotations
 
 import collections
-import signal
 import sys
 import threading
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pneu_msgs_py.contract.convert import (
     DiagStatus,
@@ -37,18 +35,16 @@ from pneu_msgs_py.contract.topics import (
     VALVE_COMMAND_TOPIC,
     qos_for,
 )
+from pneu_msgs_py.nodes.run import ShellDefaults, run_node
 from pneu_msgs_py.params.core import ParamError
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy import qos as rq
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 
-from pneu_driver.daq.errors import DriverError
 from pneu_driver.daq.nidaqmx_backend import NidaqmxBackend, visible_devices
 from pneu_driver.daq.rig import load_rig_params
 from pneu_driver.loop.driver_loop import DriverLoop
@@ -58,7 +54,7 @@ SENSOR_TOPICS = (*PRESSURE_TOPICS, JOINT_STATE_TOPIC["linear"], JOINT_STATE_TOPI
 _LEVEL = {"OK": 0, "WARN": 1, "ERROR": 2}
 
 
-class DriverNode(Node):
+class DriverNode(ShellDefaults, Node):
     def __init__(self, **node_kwargs):
         super().__init__("pneu_driver", **node_kwargs)
         ro = {"read_only": True}
@@ -139,6 +135,17 @@ class DriverNode(Node):
     def start(self) -> None:
         self.thread = self.loop.start(name="pneu_driver_loop")
         self.get_logger().info(f"driver loop running on {self.device}")
+
+    def exit_code(self) -> int:
+        if self.loop.error is not None:
+            print(f"driver_node: error: {self.loop.error}", file=sys.stderr)
+            return 1
+        return 0
+
+    def safe_shutdown(self) -> None:
+        self.loop.stop()  # the loop's finally writes 5 V and closes the tasks
+        if self.thread is not None:
+            self.thread.join(timeout=2.0)
 
     # -- loop thread ---------------------------------------------------------
     def _publish_sample(self, s) -> None:
@@ -230,44 +237,7 @@ class DriverNode(Node):
 
 
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    node = None
-    code = 0
-    try:
-        node = DriverNode()
-        node.start()
-        from rclpy.executors import SingleThreadedExecutor
-
-        try:
-            from rclpy.experimental import EventsExecutor
-
-            executor = EventsExecutor()
-        except ImportError:
-            executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin_until_future_complete(node.done)
-        if node.loop.error is not None:
-            print(f"driver_node: error: {node.loop.error}", file=sys.stderr)
-            code = 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (DriverError, ParamError, ParameterException, OSError, ValueError) as err:
-        print(f"driver_node: error: {err}", file=sys.stderr)
-        code = 1
-    finally:
-        # Ctrl-C reaches a launched node twice (the terminal's process group, then
-        # launch's forward): the second SIGINT must not cut the cleanup short.
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            if node is not None:
-                node.loop.stop()  # the loop's finally writes 5 V and closes the tasks
-                if node.thread is not None:
-                    node.thread.join(timeout=2.0)
-                node.destroy_node()
-            rclpy.try_shutdown()
-        finally:
-            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
-    return code
+    return run_node("driver_node", DriverNode, args)
 
 
 if __name__ == "__main__":

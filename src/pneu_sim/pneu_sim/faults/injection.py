@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from pneu_msgs_py.contract.samples import AXES, SensorSample
 from pneu_msgs_py.params.core import ParamError, from_dict, param, to_dict, validate
+from pneu_msgs_py.params.spec import parse_spec
 
 __all__ = [
     "FAULT_NAMES",
@@ -234,31 +235,14 @@ class FaultSpec:
         return cls(name, d.get("start_s", 1.0), d.get("duration_s", 1.0), params)
 
 
-def _value(text: str) -> Any:
-    text = text.strip()
-    for conv in (int, float):
-        try:
-            return conv(text)
-        except ValueError:
-            pass
-    return text
-
-
 def parse_fault(text: str) -> FaultSpec:
     """``NAME[:key=value,...]`` -> :class:`FaultSpec`; keys ``start_s``, ``duration_s`` and the fault's own.
 
     Raises :class:`ParamError` naming the field, the value and what is allowed.
     """
-    name, _, rest = text.strip().partition(":")
-    name = name.strip()
+    name, kv = parse_spec(text, "--fault")
     if name not in FAULT_PARAMS:
         raise ParamError("--fault", name, "one of " + ", ".join(FAULT_NAMES))
-    kv: dict[str, Any] = {}
-    for part in filter(None, (p.strip() for p in rest.split(","))):
-        key, sep, value = part.partition("=")
-        if not sep or not key.strip():
-            raise ParamError(f"--fault {name}", part, "key=value")
-        kv[key.strip()] = _value(value)
     timing = {k: kv.pop(k) for k in ("start_s", "duration_s") if k in kv}
     params = from_dict(FAULT_PARAMS[name], kv, strict=False, prefix=f"{name}.")
     return FaultSpec(name, params=params, **timing)

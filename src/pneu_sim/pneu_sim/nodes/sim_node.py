@@ -11,11 +11,9 @@ simulated time has been published.
 
 from __future__ import annotations
 
-import signal
 import sys
 import time
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pneu_driver.safety.supervisor import SafetySupervisor, load_safety_params
 from pneu_msgs_py.contract.convert import (
@@ -33,6 +31,7 @@ from pneu_msgs_py.contract.topics import (
     VALVE_COMMAND_TOPIC,
     qos_for,
 )
+from pneu_msgs_py.nodes.run import ShellDefaults, run_node
 from pneu_msgs_py.params.core import ParamError, from_dict, with_updates
 from pneu_msgs_py.params.ros import declarations
 from rcl_interfaces.msg import (
@@ -42,8 +41,6 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -71,7 +68,7 @@ def declare_from_dataclass(node: Node, params) -> dict:
     return {name: node.get_parameter(name).value for name, _, _ in decls}
 
 
-class SimNode(Node):
+class SimNode(ShellDefaults, Node):
     def __init__(self, **node_kwargs):
         super().__init__("pneu_sim", **node_kwargs)
         values = declare_from_dataclass(self, SimNodeParams())
@@ -138,6 +135,9 @@ class SimNode(Node):
             f"{p.mode} simulation, active axes: {', '.join(self.axes) or 'none'}, "
             f"duration {p.duration_s:g} s (0 = endless), safety supervisor {'on' if sup else 'off'}"
         )
+
+    def safe_shutdown(self) -> None:
+        self.core.safe_outputs()  # a real rig would now be at 5 V on both valves
 
     # -- parameters --------------------------------------------------------
     def _validate(self, params) -> SetParametersResult:
@@ -316,44 +316,8 @@ class SimNode(Node):
         self.diag_pub.publish(out)
 
 
-def make_executor():
-    """rclpy's EventsExecutor where this rclpy has it (Jazzy >= 7.1.4), else SingleThreadedExecutor."""
-    try:
-        from rclpy.experimental import EventsExecutor
-
-        return EventsExecutor()
-    except ImportError:
-        from rclpy.executors import SingleThreadedExecutor
-
-        return SingleThreadedExecutor()
-
-
 def main(args=None) -> int:
-    rclpy.init(args=args)
-    node = None
-    code = 0
-    try:
-        node = SimNode()
-        executor = make_executor()
-        executor.add_node(node)
-        executor.spin_until_future_complete(node.done)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ParamError, ParameterException, OSError) as err:
-        print(f"sim_node: error: {err}", file=sys.stderr)
-        code = 1
-    finally:
-        # Ctrl-C reaches a launched node twice (the terminal's process group, then
-        # launch's forward): the second SIGINT must not cut the cleanup short.
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            if node is not None:
-                node.core.safe_outputs()  # a real rig would now be at 5 V on both valves
-                node.destroy_node()
-            rclpy.try_shutdown()
-        finally:
-            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
-    return code
+    return run_node("sim_node", SimNode, args)
 
 
 if __name__ == "__main__":

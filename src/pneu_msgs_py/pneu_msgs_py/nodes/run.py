@@ -1,0 +1,161 @@
+"""One ``main()`` for every node: rclpy init, executor, spin, Ctrl-C, a safe shutdown.
+
+Every node shell of the project implements :class:`NodeShell` and its
+console-script entry is ``run_node("<name>", MakeNode)``. What this does, in
+the Jazzy shape (ros2/demos ``talker.py``) plus what a rig needs:
+
+1. ``rclpy.init``; the node is built (a bad parameter or file ends here with
+   one line and exit status 1);
+2. the executor: :data:`EXECUTORS` ``events`` (``rclpy.experimental.
+   EventsExecutor``, rclpy >= 7.1.4), ``single`` (``SingleThreadedExecutor``)
+   or ``auto`` (events where this rclpy has it). Chosen by the node's
+   ``executor`` parameter if it declares one, else the environment variable
+   ``PNEU_EXECUTOR``, else the node's default;
+3. ``node.start()``, then spin until ``node.done`` (a Future, or forever when
+   None), Ctrl-C (KeyboardInterrupt) or an external shutdown (SIGTERM);
+4. always: the executor is shut down (EventsExecutor must stop before its
+   nodes go), ``node.safe_shutdown()`` leaves the rig safe and files complete
+   -- with a second SIGINT ignored meanwhile (under ``ros2 launch`` a Ctrl-C
+   can reach a node twice) -- then the node is destroyed and rclpy shut down.
+
+rclpy is imported inside the functions: this module imports without ROS.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from collections.abc import Callable
+from typing import Any, Protocol
+
+__all__ = [
+    "EXECUTORS",
+    "EXECUTOR_ENV",
+    "NodeShell",
+    "ShellDefaults",
+    "executor_kind",
+    "make_executor",
+    "run_node",
+]
+
+EXECUTORS = ("auto", "events", "single")
+EXECUTOR_ENV = "PNEU_EXECUTOR"
+
+
+class NodeShell(Protocol):
+    """What :func:`run_node` needs of a node (besides being an ``rclpy.node.Node``)."""
+
+    default_executor: str  # one of EXECUTORS: what works and measures best for this node
+    done: Any  # an rclpy Future to spin until, or None: spin until stopped
+
+    def start(self) -> None:
+        """Called once the executor is ready, before spinning (start threads, timers)."""
+
+    def safe_shutdown(self) -> None:
+        """Leave the rig safe (valves at 5 V) and every file complete; must not raise."""
+
+    def exit_code(self) -> int:
+        """0, or 1 when the node stopped on an error of its own (already reported)."""
+
+
+class ShellDefaults:
+    """Mix-in with the :class:`NodeShell` defaults: spin until stopped, nothing to start."""
+
+    default_executor = "auto"
+    done: Any = None
+
+    def start(self) -> None:
+        pass
+
+    def exit_code(self) -> int:
+        return 0
+
+
+def executor_kind(node: Any, default: str = "auto") -> str:
+    """The executor asked for: parameter ``executor`` > ``$PNEU_EXECUTOR`` > ``default``.
+
+    Declares the read-only string parameter ``executor`` on ``node`` (every
+    node has it: ``ros2 run pneu_sim sim_node --ros-args -p executor:=single``).
+    """
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    if not node.has_parameter("executor"):
+        node.declare_parameter(
+            "executor",
+            "",
+            ParameterDescriptor(
+                description="rclpy executor: events, single or auto ('' = $PNEU_EXECUTOR, "
+                f"else this node's default, {default})",
+                additional_constraints="one of '', " + ", ".join(EXECUTORS),
+                read_only=True,
+            ),
+        )
+    kind = str(node.get_parameter("executor").value or "")
+    kind = kind or os.environ.get(EXECUTOR_ENV, "") or default
+    if kind not in EXECUTORS:
+        raise ValueError(f"executor: {kind!r} refused; allowed: one of {', '.join(EXECUTORS)}")
+    return kind
+
+
+def make_executor(kind: str) -> tuple[Any, str]:
+    """(executor, the kind actually used) for ``kind`` in :data:`EXECUTORS`."""
+    if kind not in EXECUTORS:
+        raise ValueError(f"executor: {kind!r} refused; allowed: one of {', '.join(EXECUTORS)}")
+    if kind in ("auto", "events"):
+        try:
+            from rclpy.experimental import EventsExecutor
+        except ImportError:
+            if kind == "events":
+                raise ValueError(
+                    "executor: 'events' refused; this rclpy has no rclpy.experimental."
+                    "EventsExecutor (Jazzy rclpy >= 7.1.4); allowed: single, auto"
+                ) from None
+        else:
+            return EventsExecutor(), "events"
+    from rclpy.executors import SingleThreadedExecutor
+
+    return SingleThreadedExecutor(), "single"
+
+
+def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | None = None) -> int:
+    """Run one node to the end (see the module docstring); returns the exit status."""
+    import rclpy
+    from pneu_msgs_py.params.core import ParamError
+    from rclpy.exceptions import ParameterException
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=args)
+    node = executor = None
+    code = 0
+    try:
+        node = make_node()
+        executor, used = make_executor(executor_kind(node, node.default_executor))
+        node.get_logger().info(f"executor: {used}")
+        executor.add_node(node)
+        node.start()
+        if node.done is None:
+            executor.spin()
+        else:
+            executor.spin_until_future_complete(node.done)
+        code = node.exit_code()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ParamError, ParameterException, OSError, ValueError, RuntimeError) as err:
+        print(f"{name}: error: {err}", file=sys.stderr)
+        code = 1
+    finally:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            if executor is not None:
+                try:
+                    executor.shutdown()
+                except Exception:  # already stopped by the signal
+                    pass
+            if node is not None:
+                node.safe_shutdown()
+                node.destroy_node()
+            rclpy.try_shutdown()
+        finally:
+            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
+    return code
