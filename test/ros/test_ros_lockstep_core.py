@@ -1,4 +1,4 @@
-"""LockstepCore (the sim node's bookkeeping) against a fake plant and fake controllers."""
+"""RigCycle (the sim node's bookkeeping) against a fake plant and fake controllers."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ import math
 import pytest
 from pneu_msgs_py.contract.samples import NEUTRAL_V, SensorSample
 from pneu_msgs_py.params.core import ParamError, from_dict, validate
-from pneu_sim.nodes.sim_core import LockstepCore, SimNodeParams, active_axes
+from pneu_sim.cycle.rig_cycle import RigCycle
+from pneu_sim.nodes.sim_core import SimNodeParams, active_axes
 
 T_NS = 1_000_000
 
@@ -41,7 +42,7 @@ def fake_controller(s: SensorSample) -> float:
 
 def test_lockstep_applies_u_k_minus_1_like_the_runner():
     plant = FakePlant()
-    core = LockstepCore(plant, axes=("linear",))
+    core = RigCycle(plant, axes=("linear",))
     s = core.reset()
     ref_plant = FakePlant()
     rs = ref_plant.reset()
@@ -64,7 +65,7 @@ def test_lockstep_applies_u_k_minus_1_like_the_runner():
 
 
 def test_lockstep_rejects_answers_to_other_samples():
-    core = LockstepCore(FakePlant(), axes=("linear", "rotary"))
+    core = RigCycle(FakePlant(), axes=("linear", "rotary"))
     s = core.reset()
     assert core.offer("linear", s.stamp_ns - T_NS, 3.0) == "stale"
     assert core.offer("linear", s.stamp_ns + T_NS, 3.0) == "stale"
@@ -77,7 +78,7 @@ def test_lockstep_rejects_answers_to_other_samples():
 
 def test_inactive_axis_holds_neutral_and_is_ignored():
     plant = FakePlant()
-    core = LockstepCore(plant, axes=("rotary",))
+    core = RigCycle(plant, axes=("rotary",))
     s = core.reset()
     assert core.offer("linear", s.stamp_ns, 9.0) == "inactive"
     core.offer("rotary", s.stamp_ns, 7.0)
@@ -90,7 +91,7 @@ def test_inactive_axis_holds_neutral_and_is_ignored():
 
 def test_timeout_is_counted_and_previous_command_held():
     plant = FakePlant()
-    core = LockstepCore(plant, axes=("linear", "rotary"))
+    core = RigCycle(plant, axes=("linear", "rotary"))
     s = core.reset()
     core.offer("linear", s.stamp_ns, 2.0)
     core.offer("rotary", s.stamp_ns, 8.0)
@@ -108,7 +109,7 @@ def test_timeout_is_counted_and_previous_command_held():
 
 def test_realtime_takes_newest_answer_and_counts_missed_periods():
     plant = FakePlant()
-    core = LockstepCore(plant, axes=("linear",), mode="realtime")
+    core = RigCycle(plant, axes=("linear",), mode="realtime")
     s0 = core.reset()
     s1 = core.advance()  # no answer in the first period
     assert core.missed == {"linear": 1}
@@ -122,7 +123,7 @@ def test_realtime_takes_newest_answer_and_counts_missed_periods():
 
 
 def test_answer_from_the_future_and_non_finite_refused():
-    core = LockstepCore(FakePlant(), axes=("linear",), mode="realtime")
+    core = RigCycle(FakePlant(), axes=("linear",), mode="realtime")
     s = core.reset()
     assert core.offer("linear", s.stamp_ns + T_NS, 3.0) == "stale"
     assert core.offer("linear", s.stamp_ns, float("nan")) == "invalid"
@@ -132,7 +133,7 @@ def test_answer_from_the_future_and_non_finite_refused():
 
 def test_without_supervisor_a_non_finite_answer_keeps_the_previous_command():
     plant = FakePlant()
-    core = LockstepCore(plant, axes=("linear",))
+    core = RigCycle(plant, axes=("linear",))
     s = core.reset()
     core.offer("linear", s.stamp_ns, 7.0)
     s = core.advance()
@@ -170,7 +171,7 @@ def test_supervisor_in_the_runners_order():
     """Cycle k: check s_k, output for tick k (u_{k-1} after the rules), answers u_k, step."""
     plant = FakePlant()
     sup = RecordingSupervisor()
-    core = LockstepCore(plant, axes=("linear",), supervisor=sup)
+    core = RigCycle(plant, axes=("linear",), supervisor=sup)
     s = core.reset()
     assert (sup.samples, sup.now) == ([0], [0])
     core.offer("linear", s.stamp_ns, 2.0)
@@ -187,7 +188,7 @@ def test_supervisor_in_the_runners_order():
 
 def test_supervisor_gets_every_answer_as_is():
     sup = RecordingSupervisor()
-    core = LockstepCore(FakePlant(), axes=("linear",), supervisor=sup)
+    core = RigCycle(FakePlant(), axes=("linear",), supervisor=sup)
     s = core.reset()
     assert core.offer("linear", s.stamp_ns, 11.0) == "accepted"
     s = core.advance()
@@ -197,11 +198,11 @@ def test_supervisor_gets_every_answer_as_is():
 
 def test_bad_mode_and_axes_refused():
     with pytest.raises(ParamError, match="mode"):
-        LockstepCore(FakePlant(), mode="fast")
+        RigCycle(FakePlant(), mode="fast")
     with pytest.raises(ParamError, match="axes"):
-        LockstepCore(FakePlant(), axes=("vertical",))
+        RigCycle(FakePlant(), axes=("vertical",))
     with pytest.raises(RuntimeError):
-        LockstepCore(FakePlant()).advance()
+        RigCycle(FakePlant()).advance()
     assert active_axes("both") == ("linear", "rotary")
     assert active_axes("none") == ()
     with pytest.raises(ParamError, match="axes"):
@@ -231,7 +232,7 @@ def test_injected_faults_act_where_the_runner_applies_them():
         ]
     )
     plant = Plant(load_plant(), seed=1)
-    core = LockstepCore(plant, axes=("linear",), faults=faults, seed=1)
+    core = RigCycle(plant, axes=("linear",), faults=faults, seed=1)
     s = core.reset()
     seen = []
     for _ in range(12):

@@ -1,14 +1,16 @@
 """The in-process experiment runner: twin and controller cores in lockstep.
 
-One control cycle (DESIGN §3, k = sample index, T = 1 ms):
+One control cycle (DESIGN §3, k = sample index, T = 1 ms) is
+:class:`pneu_sim.cycle.rig_cycle.RigCycle`'s:
 
-1. the plant is sampled at tick k → sample s_k;
-2. each active controller computes u_k from s_k;
+1. the plant is sampled at tick k → sample s_k (faults, supervisor check);
+2. each active controller computes u_k from s_k (here, in process);
 3. u_k is written at tick k+1 and held until k+2 (one-sample transport delay),
    so the plant steps from k to k+1 under u_{k−1}.
 
-The ROS graph in lockstep mode does exactly the same, so both give the same
-numbers for the same config and seed. Inactive axes hold the neutral 5 V.
+The sim node steps the same class with the controllers' answers coming over
+ROS, so a lockstep ROS run gives the same numbers for the same config and
+seed. Inactive axes hold the neutral 5 V.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pneu_msgs_py.contract.samples import AXES, NEUTRAL_V, SensorSample
+from pneu_msgs_py.contract.samples import AXES, SensorSample
+from pneu_sim.cycle.rig_cycle import RigCycle
 from pneu_sim.physics.plant import Plant
 
 from pneu_control.analysis.metrics import AxisMetrics, WindowSpec, compute_metrics
@@ -172,32 +175,22 @@ def run(
     rec_samples: list[SensorSample] = []
     rec_state: dict[str, list[tuple[float, ...]]] = {axis: [] for axis in ctrls}
     rec_u: dict[str, list[float]] = {axis: [] for axis in ctrls}
-    # (index into the (linear, rotary) command pair, axis, core, its records), fixed order
-    active = [
-        (AXES.index(axis), axis, ctrls[axis], rec_state[axis], rec_u[axis])
-        for axis in AXES
-        if axis in ctrls
-    ]
+    # (axis, core, its records), fixed order
+    active = [(axis, ctrls[axis], rec_state[axis], rec_u[axis]) for axis in AXES if axis in ctrls]
     rec_out: list[tuple[float, float]] = []  # what the DAQ held during each step
     rec_truth: list[tuple[float, float]] = []  # (x, omega) true, only with faults
     algorithms = {axis: c.params.algorithm for axis, c in ctrls.items()}
     nan_state = (math.nan,) * len(STATE_FIELDS)
 
     sup = None
-    volts_of = None
     if spec.safety is not None:
         from pneu_driver.safety.supervisor import SafetySupervisor
 
         sup = SafetySupervisor(spec.safety, sample_time_s=period)
-    inj = None
-    if spec.faults:
-        from pneu_sim.faults.injection import FaultInjector
-
-        inj = FaultInjector(spec.faults, plant, seed=spec.seed, active_axes=spec.axes)
-    elif sup is not None:
-        from pneu_sim.faults.injection import SensorScaling
-
-        volts_of = SensorScaling(spec.plant).volts
+    cycle = RigCycle(
+        plant, axes=spec.axes, x0=spec.x0, supervisor=sup, faults=spec.faults, seed=spec.seed
+    )
+    faulty = cycle.injector is not None
     events_all: list[Any] = []
     crashed: dict[str, str] = {}
 
@@ -217,8 +210,7 @@ def run(
         if bag is not None:
             bag.write_diagnostics(stamp, _diag([ev]))
 
-    s = plant.reset(x0=spec.x0)
-    u_hold_l = u_hold_r = NEUTRAL_V  # what the DAQ holds during the coming period
+    s = cycle.reset()
     interrupted = False
     report_every = max(1, int(round(1.0 / period)))  # once per simulated second
     t_wall = time.perf_counter()
@@ -226,21 +218,14 @@ def run(
     try:
         for k in range(n):
             stamp = s.stamp_ns
-            if inj is not None:
-                s, volts = inj.sample(k, s)
+            if faulty:
                 st = plant.state
                 rec_truth.append((st.x, st.omega))
-            elif sup is not None:
-                volts = volts_of(s)
-            if sup is not None:
-                sup.check_sample(s, volts)
-                u_hold_l, u_hold_r = sup.outputs(stamp)  # u_{k-1} after the rules, tick k
             rec_samples.append(s)
             answers = []  # (axis, u, state values, algorithm) for the bag, in axis order
-            u_new = [NEUTRAL_V, NEUTRAL_V]  # an inactive axis holds the neutral command
-            for i, axis, ctrl, rec_st, rec_u_ in active:
+            for axis, ctrl, rec_st, rec_u_ in active:
                 u = None
-                if not ((inj is not None and inj.silent(k, axis)) or axis in crashed):
+                if not (axis in crashed or cycle.silent(axis)):
                     try:
                         u = ctrl.update(s)
                     except Exception as err:  # a crashed controller must not stop the rig
@@ -250,15 +235,11 @@ def run(
                     rec_u_.append(math.nan)
                 else:
                     values = ctrl.state_values()
-                    if inj is not None:
-                        u = inj.command(k, axis, u)
+                    u = cycle.command(axis, u)
                     rec_st.append(values)
                     rec_u_.append(u)
                     if bag is not None:
                         answers.append((axis, u, values, ctrl.algorithm))
-                    if sup is not None:
-                        sup.command(axis, u, stamp)
-                u_new[i] = u
             if bag is not None:
                 bag.write_cycle(s, answers)
             if sup is not None:
@@ -267,17 +248,8 @@ def run(
                     events_all.extend(events)
                     if bag is not None:
                         bag.write_diagnostics(stamp, _diag(events))
-            rec_out.append((u_hold_l, u_hold_r))
-            if inj is not None:
-                s = plant.step(*inj.valves(k, u_hold_l, u_hold_r))
-            else:
-                s = plant.step(u_hold_l, u_hold_r)  # tick k -> k+1 under u_{k-1}
-            if sup is None:  # no supervisor: the DAQ holds the last value it could write
-                u_l, u_r = u_new
-                if u_l is not None and math.isfinite(u_l):
-                    u_hold_l = u_l
-                if u_r is not None and math.isfinite(u_r):
-                    u_hold_r = u_r
+            rec_out.append(cycle.held_pair)
+            s = cycle.advance()  # tick k -> k+1 under u_{k-1}
             if progress is not None and k % report_every == 0:
                 progress(k * period)
     except KeyboardInterrupt:

@@ -2,7 +2,7 @@
 
 :func:`run_loopback` runs a :class:`~pneu_control.experiment.runner.RunSpec` exactly as
 ``ros2 launch pneu_sim sim.launch.py mode:=lockstep`` does, minus the
-middleware: the sim node's :class:`pneu_sim.nodes.sim_core.LockstepCore` publishes
+middleware: the sim node's :class:`pneu_sim.cycle.rig_cycle.RigCycle` publishes
 each sample as the five sensor messages, every message is CDR-serialised
 and deserialised with rosbags' Jazzy typestore (the bytes rclpy puts on the
 wire), each active controller's :class:`~pneu_control.nodes.controller_core.ControllerShellCore`
@@ -34,7 +34,8 @@ from pneu_msgs_py.contract.topics import (
     DIAGNOSTICS_TOPIC,
     VALVE_COMMAND_TOPIC,
 )
-from pneu_sim.nodes.sim_core import LockstepCore, fill_sample_messages, safety_statuses
+from pneu_sim.cycle.rig_cycle import RigCycle
+from pneu_sim.nodes.sim_core import fill_sample_messages, safety_statuses
 from pneu_sim.physics.plant import Plant
 
 from pneu_control.analysis.metrics import WindowSpec
@@ -124,7 +125,7 @@ def run_loopback(
         from pneu_driver.safety.supervisor import SafetySupervisor
 
         supervisor = SafetySupervisor(spec.safety, sample_time_s=plant.T)
-    core = LockstepCore(
+    core = RigCycle(
         plant,
         axes=tuple(spec.axes),
         x0=spec.x0,

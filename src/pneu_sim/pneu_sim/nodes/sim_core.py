@@ -1,50 +1,25 @@
-"""The sim node's cycle bookkeeping, without ROS: which command drives which step.
+"""The sim node's core without ROS: its parameters, messages, faults and diagnostics.
 
-DESIGN §3, the same cycle as the in-process runner (``pneu_control.experiment.runner``):
-sample s_k is published; each active controller answers with u_k, stamped
-with s_k's stamp; u_k is written at tick k+1 and held until k+2, so the
-plant steps from k to k+1 under u_{k-1} (the neutral 5 V before the first
-answer). Inactive axes hold the neutral 5 V.
-
-Two modes:
-
-``lockstep``
-    :meth:`LockstepCore.offer` accepts only an answer to the current
-    sample; the node advances when :attr:`complete` (every active axis
-    answered) or when its wall-clock timeout fires -- then the missing axes
-    keep their previous command and the miss is counted in :attr:`timeouts`.
-    Deterministic: same config and seed -> the runner's numbers.
-``realtime``
-    The node advances on a 1 kHz wall-clock tick; the newest answer received
-    since the last tick is written (what a DAQ would do), answers to older
-    samples than the newest accepted are dropped (:attr:`stale`), a period
-    without a fresh answer is counted in :attr:`missed`.
-
-Per cycle k, in the runner's order (``pneu_control.experiment.runner.run``): sample
-s_k, with injected faults (:class:`pneu_sim.faults.injection.FaultInjector`) -> the
-``supervisor`` (:class:`pneu_driver.safety.supervisor.SafetySupervisor`:
-``check_sample(sample, volts)``, ``outputs(now_ns)``, ``command(axis, u,
-stamp_ns)``) checks it and gives the tick-k output (u_{k-1} after its
-rules) -> the controllers' answers u_k go to it -> the plant steps k -> k+1
-under the tick-k output (through a stuck valve if one is injected). Without
-a supervisor the DAQ holds the last finite answer.
+The cycle itself is :class:`pneu_sim.cycle.rig_cycle.RigCycle` (the one the
+in-process runner steps); the node publishes each sample with
+:func:`fill_sample_messages`, offers the controllers' answers to the cycle
+and advances it (lockstep: when every active axis answered; realtime: on a
+1 kHz wall-clock tick).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from pneu_msgs_py.contract.convert import fill_fluid_pressure, fill_joint_state, sample_to_values
-from pneu_msgs_py.contract.samples import AXES, NEUTRAL_V, SensorSample
+from pneu_msgs_py.contract.samples import AXES, SensorSample
 from pneu_msgs_py.contract.topics import PRESSURE_TOPICS
 from pneu_msgs_py.params.core import ParamError, param
 
 __all__ = [
     "MODES",
-    "LockstepCore",
     "SimNodeParams",
     "active_axes",
     "fill_sample_messages",
@@ -52,7 +27,8 @@ __all__ = [
     "safety_statuses",
 ]
 
-MODES = ("lockstep", "realtime")
+from pneu_sim.cycle.rig_cycle import MODES
+
 AXES_CHOICES = ("linear", "rotary", "both", "none")
 
 
@@ -214,180 +190,3 @@ class SimNodeParams:
         read_only=True,
     )
     lockstep: LockstepParams = param(LockstepParams)
-
-
-class LockstepCore:
-    """Sample/command bookkeeping of one simulated rig (see module docstring).
-
-    ``plant`` is a :class:`pneu_sim.physics.plant.Plant` (``reset(x0=)``, ``step(u_l, u_r)``,
-    ``T``, ``params``); any object with that interface works (the tests use a
-    fake). ``faults``: :class:`pneu_sim.faults.injection.FaultSpec` items (or their
-    ``NAME:k=v`` / dict forms), injected as the runner injects them.
-    ``volts_of(sample)``: the raw AI volts the supervisor checks (default: the
-    twin's own sensor scaling when there is a supervisor).
-    """
-
-    def __init__(
-        self,
-        plant: Any,
-        axes: tuple[str, ...] = AXES,
-        mode: str = "lockstep",
-        x0: float = 0.0,
-        supervisor: Any | None = None,
-        faults: Any = (),
-        seed: int = 0,
-        volts_of: Any | None = None,
-    ) -> None:
-        if mode not in MODES:
-            raise ParamError("mode", mode, "one of " + ", ".join(MODES))
-        for axis in axes:
-            if axis not in AXES:
-                raise ParamError("axes", axis, "one of " + ", ".join(AXES))
-        self.plant = plant
-        self.axes = tuple(axes)
-        self.mode = mode
-        self.x0 = x0
-        self.supervisor = supervisor
-        self.injector = None
-        if faults:
-            from pneu_sim.faults.injection import FaultInjector
-
-            self.injector = FaultInjector(faults, plant, seed=seed, active_axes=self.axes)
-        elif supervisor is not None and volts_of is None and hasattr(plant, "params"):
-            from pneu_sim.faults.injection import SensorScaling
-
-            volts_of = SensorScaling(plant.params).volts
-        self._volts_of = volts_of
-        self.sample: SensorSample | None = None
-        self.k = 0
-        self.steps = 0
-        self.timeouts = dict.fromkeys(self.axes, 0)
-        self.stale = dict.fromkeys(self.axes, 0)
-        self.missed = dict.fromkeys(self.axes, 0)
-        self.silenced = dict.fromkeys(self.axes, 0)
-        self._hold = dict.fromkeys(AXES, NEUTRAL_V)  # what the DAQ holds during the coming step
-        self._answer: dict[str, float] = {}  # valid answers to the current sample (u_k)
-        self._answered: set[str] = set()  # axes that answered it (valid or not)
-        self._answer_stamp = dict.fromkeys(self.axes, -1)  # newest accepted stamp per axis
-
-    @property
-    def period_s(self) -> float:
-        return float(self.plant.T)
-
-    @property
-    def held(self) -> dict[str, float]:
-        """The voltages the DAQ holds during the current step (u_{k-1}, after the supervisor)."""
-        return dict(self._hold)
-
-    def reset(self) -> SensorSample:
-        """Sample s_0 (faults applied); every axis back to the neutral 5 V, counters kept."""
-        self._hold = dict.fromkeys(AXES, NEUTRAL_V)
-        self._answer = {}
-        self._answered = set()
-        self._answer_stamp = dict.fromkeys(self.axes, -1)
-        self.k = 0
-        return self._begin(self.plant.reset(x0=self.x0))
-
-    def _begin(self, s: SensorSample) -> SensorSample:
-        """Cycle k starts (runner order): faults on the sample, supervisor check, tick-k output."""
-        volts = None
-        if self.injector is not None:
-            s, volts = self.injector.sample(self.k, s)
-        elif self._volts_of is not None:
-            volts = self._volts_of(s)
-        if self.supervisor is not None:
-            self.supervisor.check_sample(s, volts)
-            u_l, u_r = self.supervisor.outputs(s.stamp_ns)  # u_{k-1} after the rules, tick k
-            self._hold = {"linear": u_l, "rotary": u_r}
-        self.sample = s
-        return s
-
-    def silent(self, axis: str) -> bool:
-        """An injected ``controller_silent`` fault mutes ``axis`` at the current sample."""
-        return self.injector is not None and self.injector.silent(self.k, axis)
-
-    def offer(self, axis: str, stamp_ns: int, u_v: float) -> str:
-        """Take one controller answer; returns ``accepted``, ``stale``, ``silent``, ``inactive`` or ``invalid``.
-
-        Lockstep accepts only ``stamp_ns`` == the current sample's stamp (a
-        second answer to the same sample replaces the first); realtime takes
-        the newest answer not older than one already accepted. With a
-        supervisor every accepted answer goes to it as is (NaN included: it
-        refuses and trips); without one a non-finite answer is dropped and
-        the previous command held, as a DAQ would.
-        """
-        if self.sample is None:
-            raise RuntimeError("LockstepCore.offer before reset()")
-        if axis not in self.axes:
-            return "inactive"
-        if self.mode == "lockstep":
-            if stamp_ns != self.sample.stamp_ns:
-                self.stale[axis] += 1
-                return "stale"
-        elif stamp_ns < self._answer_stamp[axis] or stamp_ns > self.sample.stamp_ns:
-            self.stale[axis] += 1
-            return "stale"
-        if self.silent(axis):
-            self.silenced[axis] += 1
-            return "silent"
-        u = float(u_v)
-        if self.injector is not None:
-            u = self.injector.command(self.k, axis, u)
-        self._answer_stamp[axis] = stamp_ns
-        self._answered.add(axis)
-        if self.supervisor is not None:
-            self.supervisor.command(axis, u, stamp_ns)
-        elif not math.isfinite(u):
-            return "invalid"
-        self._answer[axis] = u
-        return "accepted"
-
-    @property
-    def complete(self) -> bool:
-        """Every active axis has answered the current sample (or is muted by a fault)."""
-        return not self.waiting_for
-
-    @property
-    def waiting_for(self) -> tuple[str, ...]:
-        return tuple(a for a in self.axes if a not in self._answered and not self.silent(a))
-
-    def advance(self) -> SensorSample:
-        """Step the plant k -> k+1 under the held u_{k-1}; then hold the answers u_k.
-
-        An axis without an answer keeps its previous command (the DAQ holds
-        its last output; the supervisor's watchdog decides when that is too
-        old) and is counted: ``timeouts`` in lockstep, ``missed`` in realtime.
-        """
-        if self.sample is None:
-            raise RuntimeError("LockstepCore.advance before reset()")
-        for axis in self.waiting_for:
-            if self.mode == "lockstep":
-                self.timeouts[axis] += 1
-            else:
-                self.missed[axis] += 1
-        u_l, u_r = self._hold["linear"], self._hold["rotary"]
-        if self.injector is not None:
-            u_l, u_r = self.injector.valves(self.k, u_l, u_r)
-        s = self.plant.step(u_l, u_r)
-        self.steps += 1
-        if self.supervisor is None:
-            self._hold.update(self._answer)
-        self._answer = {}
-        self._answered = set()
-        self.k += 1
-        return self._begin(s)
-
-    def safe_outputs(self) -> tuple[float, float]:
-        """What a real rig would hold after a stop: the valve-safe 5 V on both axes."""
-        self._hold = dict.fromkeys(AXES, NEUTRAL_V)
-        self._answer = {}
-        self._answered = set()
-        return NEUTRAL_V, NEUTRAL_V
-
-    def counters(self) -> dict[str, int]:
-        """Flat counters for diagnostics: ``steps``, ``timeouts.linear``, ..."""
-        out = {"steps": self.steps}
-        for name in ("timeouts", "stale", "missed", "silenced"):
-            for axis, n in getattr(self, name).items():
-                out[f"{name}.{axis}"] = n
-        return out

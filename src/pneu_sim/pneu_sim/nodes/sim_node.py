@@ -2,7 +2,7 @@
 
 Lockstep: publishes ``/clock`` and sample k (reliable), waits for every active
 controller's valve command stamped with sample k (or ``lockstep.timeout_s``,
-counted), then advances -- :class:`pneu_sim.nodes.sim_core.LockstepCore` does the
+counted), then advances -- :class:`pneu_sim.cycle.rig_cycle.RigCycle` does the
 bookkeeping, with the in-process runner's one-sample delay. Realtime: the
 same core advanced by a 1/T wall-clock timer. ``~/estop`` and ``~/reset``
 (std_srvs/Trigger) go to the SafetySupervisor. Exits when ``duration_s`` of
@@ -47,8 +47,8 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 
+from pneu_sim.cycle.rig_cycle import RigCycle
 from pneu_sim.nodes.sim_core import (
-    LockstepCore,
     SimNodeParams,
     active_axes,
     fill_sample_messages,
@@ -81,7 +81,7 @@ class SimNode(ShellDefaults, Node):
         self.supervisor = sup
         self.axes = active_axes(p.axes)
         faults = load_faults(p.faults, p.faults_file)
-        self.core = LockstepCore(
+        self.core = RigCycle(
             plant, axes=self.axes, mode=p.mode, x0=p.x0, supervisor=sup, faults=faults, seed=p.seed
         )
         self.n_end = round(p.duration_s / plant.T) if p.duration_s > 0 else 0
