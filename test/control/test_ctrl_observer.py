@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from pneu_control.algorithms import make_algorithm
+from pneu_control.algorithms import StepInput, make_algorithm
 from pneu_control.controller.params import omega_0_max, params_from_mapping
 from pneu_control.observers.eso import LinearEso, eso_error_matrix, eso_gains
 from pneu_control.observers.td import TrackingDifferentiator, fhan
@@ -100,12 +100,12 @@ def test_inlined_eso_is_bit_exact_with_reference_class(algorithm):
     ref = LinearEso(40.0, b0, T)
     rng = np.random.default_rng(7)
     y = 0.3
-    alg.start(y, 0.0, 0.0, 0.0, None, 0.0, (math.nan,) * 3)
+    alg.start(StepInput(y=y), None, (math.nan,) * 3)
     ref.reset(y)
     for _ in range(500):
         y += rng.normal(0, 0.01)
         u = float(rng.uniform(-5, 5))
-        alg.update(y, 1.0, 0.0, 0.0, u)
+        alg.update(StepInput(y=y, r=1.0, u_applied=u))
         ref.update(y, u)
         assert (alg.z1, alg.z2, alg.z3) == (ref.z1, ref.z2, ref.z3)
 

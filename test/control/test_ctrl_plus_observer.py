@@ -4,15 +4,13 @@ import math
 
 import numpy as np
 import pytest
+from pneu_control.algorithms.base import StepInput
 from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus, ValveCurve
-from pneu_control.controller.params import (
-    MPYE_CHART_DU_V,
-    MPYE_CHART_FLOW,
-    load_controller_params,
-)
+from pneu_control.controller.params import load_controller_params
 from pneu_control.observers.eso import eso_gains
 from pneu_control.observers.eso_chain import ChainEso, chain_gains, chain_matrices
 from pneu_msgs_py.params.core import ParamError, with_updates
+from pneu_sim.physics.params import MPYE_DU_V, MPYE_FLOW
 
 T = 0.001
 
@@ -59,14 +57,12 @@ def test_inlined_angle_observer_matches_the_slow_reference():
     p = params.eso_smc_plus
     ref = ChainEso(4, p.omega_0, p.b_0, T)
     rng = np.random.default_rng(7)
-    alg.theta = 0.0
-    alg.start(0.0, 800.0, 0.0, 0.0, None, 0.0, (math.nan,) * 3)
+    alg.start(StepInput(y=0.0, r=800.0, theta=0.0), None, (math.nan,) * 3)
     ref.reset(0.0, 0.0)
     u = 0.0
     for k in range(1, 2000):
         th = 800.0 * k * T + 0.2 * math.sin(0.3 * k) + 0.05 * rng.standard_normal()
-        alg.theta = th
-        u_next = alg.update(800.0, 800.0, 0.0, 0.0, u)
+        u_next = alg.update(StepInput(y=800.0, r=800.0, u_applied=u, theta=th))
         ref.update(th, u)
         assert (alg.z1, alg.z2, alg.z3, alg.z4) == pytest.approx(tuple(ref.z), rel=1e-9, abs=1e-7)
         u = u_next
@@ -76,17 +72,16 @@ def test_surface_integral_is_the_measured_angle_error():
     """s = ë + 2λė + λ²e with e = θ_r − θ̂: with an exact observer, s is set by the angle."""
     params = _rotary(**{"eso_smc_plus.lambda_r": 30.0})
     alg = EsoSmcPlus(params, "rotary")
-    alg.theta = 0.0
-    alg.start(800.0, 800.0, 0.0, 0.0, None, 0.0, (math.nan,) * 3)
+    alg.start(StepInput(y=800.0, r=800.0, theta=0.0), None, (math.nan,) * 3)
     # the motor lags the reference by exactly 10 rpm·s of angle at the reference speed
     alg.z1, alg.z2, alg.z3, alg.z4 = -10.0, 800.0, 0.0, 0.0
-    alg.theta = -10.0 + 800.0 * T  # exactly the prediction: no innovation
-    alg.update(800.0, 800.0, 0.0, 0.0, 0.0)
+    # exactly the prediction: no innovation
+    alg.update(StepInput(y=800.0, r=800.0, theta=-10.0 + 800.0 * T))
     assert alg.s == pytest.approx(30.0**2 * 10.0, rel=1e-3)
 
 
 def test_valve_curve_is_a_bijection_through_the_unit_point():
-    vc = ValveCurve(MPYE_CHART_DU_V, MPYE_CHART_FLOW, 1.0)
+    vc = ValveCurve(MPYE_DU_V, MPYE_FLOW, 1.0)
     assert vc.to_valve(1.0) == pytest.approx(1.0, abs=1e-12)
     assert vc.to_valve(-1.0) == pytest.approx(-1.0, abs=1e-12)
     for u in np.linspace(-5.0, 5.0, 2001):

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from pneu_control.algorithms import make_algorithm
+from pneu_control.algorithms import StepInput, make_algorithm
 from pneu_control.controller.axis import AxisController
 from pneu_control.controller.params import load_controller_params
 from pneu_msgs_py.contract.units import MM_PER_M
@@ -34,12 +34,11 @@ def _plus(overrides):
 def test_pressure_force_is_eq1_with_the_rod_at_ambient():
     _, alg = _plus({"eso_smc_plus.linear_model": "force"})
     assert alg.uses_pressures
-    alg.p_c1, alg.p_c2 = 3.0e5, 2.0e5
     A1, A2, p_a = 8.04e-4, 6.912e-4, 101325.0
-    assert alg._pressure_force() == pytest.approx(A1 * 3.0e5 - A2 * 2.0e5 - (A1 - A2) * p_a)
+    inp = StepInput(p_c1=3.0e5, p_c2=2.0e5)
+    assert alg._pressure_force(inp) == pytest.approx(A1 * 3.0e5 - A2 * 2.0e5 - (A1 - A2) * p_a)
     # balanced chambers at ambient: no force
-    alg.p_c1 = alg.p_c2 = p_a
-    assert alg._pressure_force() == pytest.approx(0.0, abs=1e-9)
+    assert alg._pressure_force(StepInput(p_c1=p_a, p_c2=p_a)) == pytest.approx(0.0, abs=1e-9)
 
 
 def test_position_model_does_not_ask_for_pressures():
@@ -62,13 +61,13 @@ def test_pressure_aided_velocity_estimate_beats_the_laser_only_eso():
     for k in range(3000):
         u = drive.update(s)
         y = s.x * MM_PER_M
-        force.p_c1, force.p_c2 = s.p_c1, s.p_c2
         if k == 0:
             for a in (laser, force):
-                a.start(y, 0.0, 0.0, 0.0, None, 0.0, (math.nan,) * 3)
+                a.start(StepInput(y=y, p_c1=s.p_c1, p_c2=s.p_c2), None, (math.nan,) * 3)
         else:
+            inp = StepInput(y=y, u_applied=u_hold - 5.0, p_c1=s.p_c1, p_c2=s.p_c2)
             for a in (laser, force):
-                a.update(y, 0.0, 0.0, 0.0, u_hold - 5.0)
+                a.update(inp)
         if k > 500:
             v = plant.state.v * MM_PER_M
             err_l.append(laser.z2 - v)
@@ -84,7 +83,7 @@ def test_friction_feedforward_delivers_the_eq2_force_change_over_a_reversal():
     p, alg = _plus({"eso_smc_plus.friction_feedforward": True})
     T, q = p.sample_time_s, p.eso_smc_plus
     w = 2.0 * math.pi * 0.25
-    alg.start(20.0, 20.0, 0.0, -20.0 * w * w, None, 0.0, (math.nan,) * 3)
+    alg.start(StepInput(y=20.0, r=20.0, r_ddot=-20.0 * w * w), None, (math.nan,) * 3)
     total = 0.0
     r_dot0 = r_dot = None
     for k in range(1, 1001):  # 1 s across the top reversal of the 20 mm, 0.25 Hz sine
@@ -96,7 +95,7 @@ def test_friction_feedforward_delivers_the_eq2_force_change_over_a_reversal():
         )
         if r_dot0 is None:
             r_dot0 = r_dot
-        alg.update(r, r, r_dot, r_ddot, 0.0)
+        alg.update(StepInput(y=r, r=r, r_dot=r_dot, r_ddot=r_ddot))
         total += alg.u_ff * T * q.b_F  # N
     F_f = lambda v: q.A_f * math.tanh(v / q.v_s) + q.c_v * 1e-3 * v  # noqa: E731 (Eq. 2)
     assert total == pytest.approx(F_f(r_dot) - F_f(r_dot0), rel=1e-9)
@@ -143,10 +142,8 @@ def test_bad_geometry_is_refused():
 
 def test_a_nan_pressure_sample_holds_the_last_force():
     _, alg = _plus({**SINE, **FORCE})
-    alg.p_c1, alg.p_c2 = 2.0e5, 2.0e5
-    alg.start(0.0, 0.0, 0.0, 0.0, None, 0.0, (math.nan,) * 3)
-    u1 = alg.update(0.0, 0.1, 0.0, 0.0, 0.0)
-    alg.p_c1 = math.nan
-    u2 = alg.update(0.0, 0.1, 0.0, 0.0, u1)
+    alg.start(StepInput(p_c1=2.0e5, p_c2=2.0e5), None, (math.nan,) * 3)
+    u1 = alg.update(StepInput(r=0.1, p_c1=2.0e5, p_c2=2.0e5))
+    u2 = alg.update(StepInput(r=0.1, u_applied=u1, p_c1=math.nan, p_c2=2.0e5))
     assert math.isfinite(u2)
     assert alg.F_p == pytest.approx((8.04e-4 - 6.912e-4) * (2.0e5 - 101325.0))  # the last valid

@@ -1,16 +1,34 @@
-"""Control algorithms behind one interface (:mod:`.base`): PID, LADRC, ESO-SMC, ESO-SMC+ (ours)."""
+"""Control algorithms behind one interface (:mod:`.base`): PID, LADRC, ESO-SMC, ESO-SMC+ (ours).
+
+Each module holds one algorithm and its parameter group; :mod:`.smc` what the
+sliding-mode laws share, :mod:`.valve_curve` the MPYE flow linearisation.
+To add an algorithm: a module with ``XParams`` (a frozen dataclass of
+:func:`pneu_msgs_py.params.core.param` fields) and a class implementing
+:class:`.base.Algorithm`; register both below and in
+:class:`pneu_control.controller.params.AxisControllerParams` (a field named
+after it, and its name in ``ALGORITHMS``).
+"""
 
 from __future__ import annotations
 
-from pneu_control.algorithms.base import Algorithm
-from pneu_control.algorithms.eso_smc import EsoSmc
-from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus
-from pneu_control.algorithms.ladrc import Ladrc
-from pneu_control.algorithms.pid import Pid
-from pneu_control.controller.params import AxisControllerParams
+from typing import TYPE_CHECKING
+
+from pneu_control.algorithms.base import Algorithm, StepInput
+from pneu_control.algorithms.eso_smc import EsoSmc, EsoSmcParams
+from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus, EsoSmcPlusParams
+from pneu_control.algorithms.ladrc import Ladrc, LadrcParams
+from pneu_control.algorithms.pid import Pid, PidParams
+
+if TYPE_CHECKING:
+    from pneu_control.controller.params import AxisControllerParams
 
 __all__ = [
     "Algorithm",
+    "StepInput",
+    "PidParams",
+    "LadrcParams",
+    "EsoSmcParams",
+    "EsoSmcPlusParams",
     "Pid",
     "Ladrc",
     "EsoSmc",

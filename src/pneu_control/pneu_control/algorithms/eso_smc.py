@@ -56,13 +56,88 @@ integrator (tested); the compensated loop does not.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from pneu_msgs_py.contract.units import RPM_PER_RAD_S
+from pneu_msgs_py.params.core import param
 
-from pneu_control.controller.params import AxisControllerParams
-from pneu_control.observers.eso import eso_gains
+from pneu_control.algorithms.base import StepInput
+from pneu_control.algorithms.smc import (
+    NONNEGATIVE,
+    POSITIVE,
+    b_0_field,
+    conditional_integral,
+    delay_compensation_field,
+    delta_field,
+    epsilon_field,
+    k_field,
+    lambda_r_field,
+    omega_0_field,
+    sat,
+)
+from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predict3
 
-__all__ = ["EsoSmc", "friction_gain_max"]
+if TYPE_CHECKING:
+    from pneu_control.controller.params import AxisControllerParams
+
+__all__ = ["EsoSmc", "EsoSmcParams", "friction_gain_max"]
+
+
+@dataclass(frozen=True)
+class EsoSmcParams:
+    """ESO-based sliding mode control (Eq. 18, 26, 28–31, corrected per errata).
+
+    s = ė + 2 λ_R e + λ_R² ∫e dt, e = v1 − z1, ė = v2 − z2 (double pole at −λ_R);
+    u = (ε sat(s) + v3 + 2 λ_R ė + λ_R² e − z3 − f_k) / b0,
+    sat(s) = clamp(k s, −1, 1) for |s| ≤ Δ and sign(s) outside (Eq. 29). Only
+    k = 1/Δ is continuous; the paper prints k = 0.5 with Δ = 0.1 (discontinuous
+    jump from kΔ to 1 at |s| = Δ). We accept k ≤ 1/Δ and require the discrete
+    boundary-layer gain ε k T < 1 (see :class:`AxisControllerParams`).
+    """
+
+    lambda_r: float = lambda_r_field(250.0, "paper")
+    omega_0: float = omega_0_field(25.0, "paper", "observer bandwidth ω0 (Eq. 17)")
+    b_0: float = b_0_field(3000.0, "paper")
+    epsilon: float = epsilon_field(1200.0, "paper")
+    delta: float = delta_field(0.1, "paper")
+    k: float = k_field(0.5, "paper (k·Δ = 0.05: discontinuous, see errata)")
+    integral_anti_windup: bool = param(
+        True,
+        desc="freeze ∫e while e pushes further into a saturation (valve command, or |s| > Δ)",
+    )
+    delay_compensation: bool = delay_compensation_field()
+    friction_compensation: bool = param(
+        False,
+        desc="rotary only: feed the friction torque of Eq. 9 into the ESO and the law (Eq. 31)",
+    )
+    M_c: float = param(
+        0.1281,
+        unit="N·m",
+        desc="Coulomb friction torque (Eq. 9)",
+        **NONNEGATIVE,
+        source="paper Table 1",
+    )
+    M_v: float = param(
+        8.66e-5,
+        unit="N·m/rpm",
+        desc="viscous friction coefficient (Eq. 9)",
+        **NONNEGATIVE,
+        source="paper Table 1",
+    )
+    J_m: float = param(
+        3.5e-5,
+        unit="kg·m²",
+        desc="rotating inertia for M_f/J_m (paper silent)",
+        **POSITIVE,
+        source="plant-parameters.md (±50 %)",
+    )
+    coulomb_smoothing: float = param(
+        100.0,
+        unit="rpm",
+        desc="ω_s of the smoothed sign tanh(ω/ω_s) in Eq. 9 (our choice; bounds the ESO friction gain)",
+        **POSITIVE,
+    )
 
 
 def friction_gain_max(M_c: float, M_v: float, J_m: float, omega_s: float) -> float:
@@ -73,6 +148,8 @@ def friction_gain_max(M_c: float, M_v: float, J_m: float, omega_s: float) -> flo
 class EsoSmc:
     name = "eso_smc"
     uses_td = True
+    uses_theta = False
+    uses_pressures = False
 
     def __init__(self, params: AxisControllerParams, axis: str):
         p = params.eso_smc
@@ -98,11 +175,9 @@ class EsoSmc:
         lim = params.limits
         self.lo = lim.u_min - lim.u_neutral
         self.hi = lim.u_max - lim.u_neutral
-        # delay compensation: the controller attaches its command history (V, oldest first)
         self.dc = p.delay_compensation and params.transport_delay_samples > 0
         self.tau = params.transport_delay_samples * T
         self.u_n = lim.u_neutral
-        self.pending: list[float] = [lim.u_neutral] * (params.transport_delay_samples + 1)
         self.z1 = self.z2 = self.z3 = 0.0
         self.s = 0.0
         self.integral = 0.0
@@ -124,22 +199,14 @@ class EsoSmc:
         sech2 = 0.0 if x > 30.0 else 1.0 / (math.cosh(x) ** 2)
         return -(self.fv + self.fc * sech2) * z2
 
-    def _sat(self, s: float) -> float:
-        d = self.delta
-        if s > d:
-            return 1.0
-        if s < -d:
-            return -1.0
-        return self.k * s
-
-    def start(self, y, r, r_dot, r_ddot, u_prev, u_applied, hint):
-        self.z1 = z1 = hint[0] if math.isfinite(hint[0]) else y
+    def start(self, inp: StepInput, u_prev, hint):
+        self.z1 = z1 = hint[0] if math.isfinite(hint[0]) else inp.y
         self.z2 = z2 = hint[1] if math.isfinite(hint[1]) else 0.0
         f_k = self.friction_term(z1, z2)
         self.f_k = f_k
-        self.u_in = u_applied
-        e = r - z1
-        ed = r_dot - z2
+        self.u_in = u_applied = inp.u_applied
+        e = inp.r - z1
+        ed = inp.r_dot - z2
         if u_prev is None:  # cold start: ∫e from 0 (Eq. 26), no disturbance estimate
             self.z3 = 0.0
             self.integral = 0.0
@@ -149,37 +216,27 @@ class EsoSmc:
             self.integral = -(ed + self.c1 * e) / self.c2
         s = ed + self.c1 * e + self.c2 * self.integral
         self.s = s
-        nominal = self.eps * self._sat(s) + r_ddot + self.c1 * ed + self.c2 * e - f_k
+        nominal = (
+            self.eps * sat(s, self.delta, self.k) + inp.r_ddot + self.c1 * ed + self.c2 * e - f_k
+        )
         u = (nominal - self.z3) / self.b0
         self.u_raw = u
         return self.hi if u > self.hi else (self.lo if u < self.lo else u)
 
-    def _predict(self, z1, z2, z3, r, r_dot, r_ddot):
-        """ESO model run over the transport delay with the commands already sent (Φ, Γ exact)."""
-        T, T2h, b0, u_n, f_k = self.T, self.T2h, self.b0, self.u_n, self.f_k
-        pend = self.pending  # [on the valve last period, then the d commands in the pipe]
-        for i in range(1, len(pend)):
-            acc = z3 + b0 * (pend[i] - u_n) + f_k
-            z1 += T * z2 + T2h * acc
-            z2 += T * acc
-        tau = self.tau
-        return z1, z2, r + tau * r_dot + 0.5 * tau * tau * r_ddot, r_dot + tau * r_ddot
-
-    def update(self, y, r, r_dot, r_ddot, u_applied):
+    def update(self, inp: StepInput):
         T = self.T
-        # ESO, Eq. 18 discretised (pneu_control.observers.eso.LinearEso.update), f_k held
-        z2, z3 = self.z2, self.z3
-        self.u_in = u_applied
-        acc = z3 + self.b0 * u_applied + self.f_k
-        z1p = self.z1 + T * z2 + self.T2h * acc
-        z2p = z2 + T * acc
-        ey = y - z1p
-        z1 = z1p + self.l1 * ey
-        z2 = z2p + self.l2 * ey
-        z3 = z3 + self.l3 * ey
+        self.u_in = u_applied = inp.u_applied
+        z3 = self.z3
+        # ESO, Eq. 18 discretised (pneu_control.observers.eso), f_k held
+        z1, z2, z3 = eso3_step(
+            self.z1, self.z2, z3, z3 + self.b0 * u_applied + self.f_k, inp.y, T, self.T2h,
+            self.l1, self.l2, self.l3,
+        )  # fmt: skip
         self.z1, self.z2, self.z3 = z1, z2, z3
+        r, r_dot, r_ddot = inp.r, inp.r_dot, inp.r_ddot
         if self.dc:  # act on the state the command will meet: t + d T
-            z1, z2, r, r_dot = self._predict(z1, z2, z3, r, r_dot, r_ddot)
+            z1, z2 = predict3(z1, z2, z3, inp.history, self.u_n, self.b0, self.f_k, T, self.T2h)
+            r, r_dot = extrapolate(r, r_dot, r_ddot, self.tau)
         # sliding surface, Eq. 26 (fixed: double pole at −λ)
         e = r - z1
         ed = r_dot - z2
@@ -187,28 +244,19 @@ class EsoSmc:
         c1, c2 = self.c1, self.c2
         s = ed + c1 * e + c2 * integral
         self.s = s
-        d = self.delta
-        if s > d:  # Eq. 29
-            sat = 1.0
-        elif s < -d:
-            sat = -1.0
-        else:
-            sat = self.k * s
         if self.fric:
             f_k = self.friction_term(z1, z2)
             self.f_k = f_k
         else:
             f_k = 0.0
-        # Eq. 30/31 (fixed): ṡ = −ε sat(s)
-        u = (self.eps * sat + r_ddot + c1 * ed + c2 * e - z3 - f_k) / self.b0
+        # Eq. 30/31 (fixed): ṡ = −ε sat(s)  (Eq. 29)
+        u = (self.eps * sat(s, self.delta, self.k) + r_ddot + c1 * ed + c2 * e - z3 - f_k) / self.b0
         self.u_raw = u
-        hi, lo = self.hi, self.lo
         if self.aw:  # conditional integration (see module docstring)
-            if e > 0.0:
-                if not (u > hi or s > d):
-                    self.integral = integral
-            elif not (u < lo or s < -d):
-                self.integral = integral
+            self.integral = conditional_integral(
+                self.integral, integral, e, u, s, self.lo, self.hi, self.delta
+            )
         else:
             self.integral = integral
+        hi, lo = self.hi, self.lo
         return hi if u > hi else (lo if u < lo else u)

@@ -127,70 +127,22 @@ Units: mm (linear) or rpm / rpm·s (rotary); λ 1/s; b0 (mm|rpm)/s²/V;
 
 from __future__ import annotations
 
-import bisect
 import math
+from typing import TYPE_CHECKING
 
-from pneu_control.controller.params import AxisControllerParams
-from pneu_control.observers.eso import eso_gains
-from pneu_control.observers.eso_chain import chain_gains
+from pneu_control.algorithms.base import StepInput
+from pneu_control.algorithms.eso_smc_plus_params import EsoSmcPlusParams
+from pneu_control.algorithms.smc import conditional_integral, sat
+from pneu_control.algorithms.valve_curve import IDENTITY, ValveCurve
+from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predict3
+from pneu_control.observers.eso_chain import chain_gains, eso4_step, predict4
 
-__all__ = ["EsoSmcPlus", "ValveCurve"]
+if TYPE_CHECKING:
+    from pneu_control.controller.params import AxisControllerParams
+
+__all__ = ["EsoSmcPlus", "EsoSmcPlusParams", "ValveCurve"]
 
 _NAN = float("nan")
-
-
-class ValveCurve:
-    """Static valve-flow linearisation v ↔ u (see module docstring, item 2).
-
-    ``to_valve(v)``: linearised command → valve deviation u (V).
-    ``to_linear(u)``: valve deviation → linearised command (its inverse).
-    """
-
-    __slots__ = ("du", "du_max", "fl", "g", "inv_g", "v_max")
-
-    def __init__(self, du_table, flow_table, unit_v: float):
-        self.du = [float(v) for v in du_table]
-        self.fl = [float(v) for v in flow_table]
-        self.g = self._flow(unit_v) / unit_v
-        self.inv_g = 1.0 / self.g
-        self.du_max = self.du[-1]
-        self.v_max = self.inv_g  # |v| at full opening
-
-    def _flow(self, a: float) -> float:
-        du, fl = self.du, self.fl
-        if a >= du[-1]:
-            return 1.0
-        i = bisect.bisect_right(du, a) - 1
-        return fl[i] + (fl[i + 1] - fl[i]) * (a - du[i]) / (du[i + 1] - du[i])
-
-    def to_linear(self, u: float) -> float:
-        a = u if u >= 0.0 else -u
-        if a >= self.du_max:
-            v = self.v_max + (a - self.du_max)
-        else:
-            v = self._flow(a) * self.inv_g
-        return v if u >= 0.0 else -v
-
-    def to_valve(self, v: float) -> float:
-        a = v if v >= 0.0 else -v
-        if a >= self.v_max:
-            u = self.du_max + (a - self.v_max)
-        else:
-            q = a * self.g
-            du, fl = self.du, self.fl
-            i = bisect.bisect_right(fl, q) - 1
-            u = du[i] + (du[i + 1] - du[i]) * (q - fl[i]) / (fl[i + 1] - fl[i])
-        return u if v >= 0.0 else -u
-
-
-class _Identity:
-    @staticmethod
-    def to_linear(u: float) -> float:
-        return u
-
-    @staticmethod
-    def to_valve(v: float) -> float:
-        return v
 
 
 class EsoSmcPlus:
@@ -211,20 +163,20 @@ class EsoSmcPlus:
         self.k = p.k
         self.uses_td = p.reference_derivatives == "td"
         self.angle = axis == "rotary" and p.rotary_observer == "angle"
-        self.uses_theta = self.angle  # the AxisController sets .theta (rpm·s) every sample
+        self.uses_theta = self.angle  # reads StepInput.theta (rpm·s)
         # rotary_model "angle" with a TD-using algorithm: the controller passes (θ, θ_r, ω_r, ω̇_r)
         self.angle_inputs = axis == "rotary" and params.rotary_model == "angle" and self.uses_td
         if self.angle:
-            self.l1, self.l2, self.l3, self.l4 = chain_gains(4, p.omega_0, T)
+            self.l4s = chain_gains(4, p.omega_0, T)
         else:
             self.l1, self.l2, self.l3 = eso_gains(p.omega_0, T)
-            self.l4 = 0.0
         self.valve = (
             ValveCurve(p.valve_du_table, p.valve_flow_table, p.valve_unit_v)
             if p.valve_linearisation
-            else _Identity()
+            else IDENTITY
         )
         self.lin_id = not p.valve_linearisation
+        self.to_lin = None if self.lin_id else self.valve.to_linear  # for the predictors
         # linear_model "force": the cascade on the measured chamber pressures (module docstring)
         self.force = axis == "linear" and p.linear_model == "force"
         self.uses_pressures = self.force
@@ -240,7 +192,6 @@ class EsoSmcPlus:
         self.nA1s, self.nA2s = p.n_poly * p.A_c1**2, p.n_poly * p.A_c2**2
         self.V1_0 = p.V_1d + p.A_c1 * 0.5 * p.L  # m³ at x = 0
         self.V2_0 = p.V_2d + p.A_c2 * 0.5 * p.L
-        self.p_c1 = self.p_c2 = _NAN  # chamber pressures, Pa abs (set by the controller)
         self.F_p = _NAN  # measured pressure force, N
         self.a_in = 0.0  # (F_p − F_f(ẋ̂))/M over the last period, mm/s²
         self.F_d_prev = _NAN
@@ -256,8 +207,6 @@ class EsoSmcPlus:
         self.v_hi = self.valve.to_linear(self.hi)
         self.dc = p.delay_compensation and params.transport_delay_samples > 0
         self.tau = params.transport_delay_samples * T
-        self.pending: list[float] = [lim.u_neutral] * (params.transport_delay_samples + 1)
-        self.theta = 0.0  # measured angle, rpm·s (set by the controller)
         # states: linear (z1, z2, z3) = (x, ẋ, f); rotary angle (z1..z4) = (θ, ω, ω̇, f)
         self.z1 = self.z2 = self.z3 = self.z4 = 0.0
         self.integral = 0.0  # linear / speed observer: ∫e dt
@@ -278,21 +227,14 @@ class EsoSmcPlus:
             return self.z1, self.z2, self.z3
         return self.z2, self.z3, self.z4 + self.b0 * self.v_in  # speed domain: (ω, ω̇, ω̈)
 
-    def _sat(self, s: float) -> float:
-        d = self.delta
-        if s > d:
-            return 1.0
-        if s < -d:
-            return -1.0
-        return self.k * s
-
     def _out(self, v: float) -> float:
         self.u_raw = u = v if self.lin_id else self.valve.to_valve(v)
         return self.hi if u > self.hi else (self.lo if u < self.lo else u)
 
     # -- first sample -------------------------------------------------------
-    def start(self, y, r, r_dot, r_ddot, u_prev, u_applied, hint):
-        v_in = self.valve.to_linear(u_applied)
+    def start(self, inp: StepInput, u_prev, hint):
+        y, r, r_dot, r_ddot = inp.y, inp.r, inp.r_dot, inp.r_ddot
+        v_in = self.valve.to_linear(inp.u_applied)
         self.v_in = v_in
         b0 = self.b0
         h0 = hint[0] if math.isfinite(hint[0]) else _NAN
@@ -301,14 +243,14 @@ class EsoSmcPlus:
         if self.force:
             self.z1 = z1 = h0 if math.isfinite(h0) else y
             self.z2 = z2 = h1
-            F_p = self._pressure_force()
+            F_p = self._pressure_force(inp)
             self.F_p = F_p = F_p if math.isfinite(F_p) else 0.0
             self.a_in = (F_p - self._friction(z2)) * self.inv_M_k
             self.z3 = h2 - self.a_in  # cold start: at rest (ẍ = 0), the offsets go into f
             e, ed = r - z1, r_dot - z2
             self.integral = 0.0 if u_prev is None else -(ed + self.c1 * e) / self.c2
             self.F_d_prev = _NAN
-            return self._out(self._law_force(r, r_dot, r_ddot, F_p, False))
+            return self._out(self._law_force(inp, F_p, False))
         if not self.angle:
             self.z1 = z1 = h0 if math.isfinite(h0) else y
             self.z2 = z2 = h1
@@ -317,10 +259,16 @@ class EsoSmcPlus:
             self.integral = 0.0 if u_prev is None else -(ed + self.c1 * e) / self.c2
             s = ed + self.c1 * e + self.c2 * self.integral
             self.s = s
-            v = (self.eps * self._sat(s) + r_ddot + self.c1 * ed + self.c2 * e - self.z3) / b0
+            v = (
+                self.eps * sat(s, self.delta, self.k)
+                + r_ddot
+                + self.c1 * ed
+                + self.c2 * e
+                - self.z3
+            ) / b0
             return self._out(v)
         w_r, wd_r, wdd_r = self._speed_ref(r, r_dot, r_ddot)
-        self.z1 = th = self.theta
+        self.z1 = th = inp.theta
         if self.angle_inputs:  # hint in the angle domain: (θ, ω, ω̇)
             self.z2 = h1 if math.isfinite(hint[1]) else 0.0
             self.z3 = h2
@@ -336,7 +284,9 @@ class EsoSmcPlus:
         self.w_r_prev = w_r
         s = edd + self.c1 * ed + self.c2 * e
         self.s = s
-        v = (self.eps * self._sat(s) + wdd_r + self.c1 * edd + self.c2 * ed - self.z4) / b0
+        v = (
+            self.eps * sat(s, self.delta, self.k) + wdd_r + self.c1 * edd + self.c2 * ed - self.z4
+        ) / b0
         return self._out(v)
 
     def _speed_ref(self, r, r_dot, r_ddot):
@@ -346,39 +296,41 @@ class EsoSmcPlus:
         return r, r_dot, r_ddot
 
     # -- every later sample -------------------------------------------------
-    def update(self, y, r, r_dot, r_ddot, u_applied):
+    def update(self, inp: StepInput):
+        u_applied = inp.u_applied
         v_in = u_applied if self.lin_id else self.valve.to_linear(u_applied)
         self.v_in = v_in
         if self.angle:
-            return self._update_angle(r, r_dot, r_ddot, v_in)
+            return self._update_angle(inp, v_in)
         if self.force:
-            return self._update_force(y, r, r_dot, r_ddot, v_in)
+            return self._update_force(inp)
         T = self.T
         if self.ffw:  # the ESO models the law's part only; the FF acts on the force
             ffp = self.ff_pipe
             v_in -= ffp[0]
             del ffp[0]
         # 3-state ESO (Eq. 18, exact ZOH current observer, pneu_control.observers.eso)
-        z2, z3 = self.z2, self.z3
-        acc = z3 + self.b0 * v_in
-        z1p = self.z1 + T * z2 + self.T2h * acc
-        z2p = z2 + T * acc
-        ey = y - z1p
-        z1 = z1p + self.l1 * ey
-        z2 = z2p + self.l2 * ey
-        z3 = z3 + self.l3 * ey
+        z3 = self.z3
+        z1, z2, z3 = eso3_step(
+            self.z1, self.z2, z3, z3 + self.b0 * v_in, inp.y, T, self.T2h,
+            self.l1, self.l2, self.l3,
+        )  # fmt: skip
         self.z1, self.z2, self.z3 = z1, z2, z3
+        r, r_dot, r_ddot = inp.r, inp.r_dot, inp.r_ddot
         if self.dc:
-            z1, z2, r, r_dot = self._predict3(z1, z2, z3, r, r_dot, r_ddot)
+            z1, z2 = predict3(
+                z1, z2, z3, inp.history, self.u_n, self.b0, 0.0, T, self.T2h, self.to_lin
+            )
+            r, r_dot = extrapolate(r, r_dot, r_ddot, self.tau)
         e = r - z1
         ed = r_dot - z2
         integral = self.integral + T * e
         c1, c2 = self.c1, self.c2
         s = ed + c1 * e + c2 * integral  # Eq. 26 (fixed)
         self.s = s
-        d = self.delta
-        sat = 1.0 if s > d else (-1.0 if s < -d else self.k * s)  # Eq. 29
-        v = (self.eps * sat + r_ddot + c1 * ed + c2 * e - z3) / self.b0  # Eq. 30 (fixed)
+        v = (
+            self.eps * sat(s, self.delta, self.k) + r_ddot + c1 * ed + c2 * e - z3
+        ) / self.b0  # Eq. 30
         if self.ffw:
             # friction feed-forward through the pressure rate: u_ff = dF_f(ṙ)/dt / b_F (Eq. 2)
             F_r = self._friction(r_dot)
@@ -388,53 +340,38 @@ class EsoSmcPlus:
             self.u_ff = u_ff
             v += u_ff
         # conditional integration (as ESO-SMC): valve saturation or |s| > Δ
-        if e > 0.0:
-            if not (v > self.v_hi or s > d):
-                self.integral = integral
-        elif not (v < self.v_lo or s < -d):
-            self.integral = integral
+        self.integral = conditional_integral(
+            self.integral, integral, e, v, s, self.v_lo, self.v_hi, self.delta
+        )
         return self._out(v)
 
-    def _predict3(self, z1, z2, z3, r, r_dot, r_ddot):
-        T, T2h, b0, u_n, to_lin = self.T, self.T2h, self.b0, self.u_n, self.valve.to_linear
-        pend = self.pending
-        for i in range(1, len(pend)):
-            acc = z3 + b0 * to_lin(pend[i] - u_n)
-            z1 += T * z2 + T2h * acc
-            z2 += T * acc
-        tau = self.tau
-        return z1, z2, r + tau * r_dot + 0.5 * tau * tau * r_ddot, r_dot + tau * r_ddot
-
-    def _pressure_force(self) -> float:
+    def _pressure_force(self, inp: StepInput) -> float:
         """F_p = A_c1 p_c1 − A_c2 p_c2 − A_r p_a (errata Eq. 1), N."""
-        return self.A_c1 * self.p_c1 - self.A_c2 * self.p_c2 - self.F_0
+        return self.A_c1 * inp.p_c1 - self.A_c2 * inp.p_c2 - self.F_0
 
     def _friction(self, v: float) -> float:
         """F_f(v) of Eq. 2, Coulomb sign smoothed (tanh over v_s), N; v in mm/s."""
         return self.A_f * math.tanh(v * self.inv_vs) + self.c_v_k * v
 
-    def _update_force(self, y, r, r_dot, r_ddot, v_in):
+    def _update_force(self, inp: StepInput):
         T = self.T
         # 3-state ESO on the laser with the measured acceleration as known input:
         # ẍ = f + (F_p − F_f(ẋ))/M  (f: sensor offsets, static friction, model error)
-        z2, z3 = self.z2, self.z3
-        acc = z3 + self.a_in
-        z1p = self.z1 + T * z2 + self.T2h * acc
-        z2p = z2 + T * acc
-        ey = y - z1p
-        z1 = z1p + self.l1 * ey
-        z2 = z2p + self.l2 * ey
-        z3 = z3 + self.l3 * ey
+        z3 = self.z3
+        z1, z2, z3 = eso3_step(
+            self.z1, self.z2, z3, z3 + self.a_in, inp.y, T, self.T2h, self.l1, self.l2, self.l3
+        )
         self.z1, self.z2, self.z3 = z1, z2, z3
-        F_p = self._pressure_force()
+        F_p = self._pressure_force(inp)
         if not (-1e300 < F_p < 1e300):  # no pressures this sample: hold the last one
             F_p = self.F_p
         self.F_p = F_p
         self.a_in = (F_p - self._friction(z2)) * self.inv_M_k
-        return self._out(self._law_force(r, r_dot, r_ddot, F_p, True))
+        return self._out(self._law_force(inp, F_p, True))
 
-    def _law_force(self, r, r_dot, r_ddot, F_p, integrate):
+    def _law_force(self, inp: StepInput, F_p, integrate):
         T, z1, z2, z3 = self.T, self.z1, self.z2, self.z3
+        r, r_dot, r_ddot = inp.r, inp.r_dot, inp.r_ddot
         # outer loop: Eq. 26–30 on ẍ, asking for an acceleration a_d
         e = r - z1
         ed = r_dot - z2
@@ -442,9 +379,7 @@ class EsoSmcPlus:
         c1, c2 = self.c1, self.c2
         s = ed + c1 * e + c2 * integral
         self.s = s
-        d = self.delta
-        sat = 1.0 if s > d else (-1.0 if s < -d else self.k * s)
-        a_d = self.eps * sat + r_ddot + c1 * ed + c2 * e - z3
+        a_d = self.eps * sat(s, self.delta, self.k) + r_ddot + c1 * ed + c2 * e - z3
         # desired piston force (Eq. 1 with the Eq. 2 friction of the reference speed)
         F_r = self.M_k * r_ddot + self._friction(r_dot)  # the reference's own force
         F_d = F_r + self.M_k * (a_d - r_ddot)
@@ -454,45 +389,38 @@ class EsoSmcPlus:
         F_d_dot = 0.0 if F_rp != F_rp else (F_r - F_rp) / T
         # inner loop: Ḟ_p = b_F u − n (A1² p1/V1 + A2² p2/V2) ẋ  (Eq. 3/4, volume terms)
         x_m = 1e-3 * z1
-        K_s = self.nA1s * self.p_c1 / (self.V1_0 + self.A_c1 * x_m) + self.nA2s * self.p_c2 / (
+        K_s = self.nA1s * inp.p_c1 / (self.V1_0 + self.A_c1 * x_m) + self.nA2s * inp.p_c2 / (
             self.V2_0 - self.A_c2 * x_m
         )
         if not (-1e300 < K_s < 1e300):  # a NaN pressure this sample: no stiffness term
             K_s = 0.0
         v = (F_d_dot + self.k_F * (F_d - F_p) + K_s * 1e-3 * z2) * self.inv_bF
-        if not integrate:
-            return v
-        if e > 0.0:  # conditional integration (as ESO-SMC)
-            if not (v > self.v_hi or s > d):
-                self.integral = integral
-        elif not (v < self.v_lo or s < -d):
-            self.integral = integral
+        if integrate:  # conditional integration (as ESO-SMC)
+            self.integral = conditional_integral(
+                self.integral, integral, e, v, s, self.v_lo, self.v_hi, self.delta
+            )
         return v
 
-    def _update_angle(self, r, r_dot, r_ddot, v_in):
+    def _update_angle(self, inp: StepInput, v_in):
         T, T2h, T3s = self.T, self.T2h, self.T3s
-        # 4-state ESO on the angle (θ‴ = f + b0 u; eso_chain, exact ZOH current observer)
-        z2, z3, z4 = self.z2, self.z3, self.z4
-        jerk = z4 + self.b0 * v_in
-        z1p = self.z1 + T * z2 + T2h * z3 + T3s * jerk
-        z2p = z2 + T * z3 + T2h * jerk
-        z3p = z3 + T * jerk
-        ey = self.theta - z1p
-        z1 = z1p + self.l1 * ey
-        z2 = z2p + self.l2 * ey
-        z3 = z3p + self.l3 * ey
-        z4 = z4 + self.l4 * ey
+        # 4-state ESO on the angle (θ‴ = f + b0 u; observers.eso_chain, exact ZOH current observer)
+        z4 = self.z4
+        z1, z2, z3, z4 = eso4_step(
+            self.z1, self.z2, self.z3, z4, z4 + self.b0 * v_in, inp.theta, T, T2h, T3s, self.l4s
+        )
         self.z1, self.z2, self.z3, self.z4 = z1, z2, z3, z4
-        w_r, wd_r, wdd_r = self._speed_ref(r, r_dot, r_ddot)
+        w_r, wd_r, wdd_r = self._speed_ref(inp.r, inp.r_dot, inp.r_ddot)
         # reference angle θ_r = ∫ω_r dt (trapezoid); the controller's own in angle_inputs
         if self.angle_inputs:
-            th_r = r
+            th_r = inp.r
         else:
             th_r = self.th_r + 0.5 * T * (self.w_r_prev + w_r)
             self.w_r_prev = w_r
         th_c, w_c, wd_c = th_r, w_r, wd_r
         if self.dc:  # act on the state the command will meet: t + d T
-            z1, z2, z3 = self._predict4(z1, z2, z3, z4)
+            z1, z2, z3 = predict4(
+                z1, z2, z3, z4, inp.history, self.u_n, self.b0, T, T2h, T3s, self.to_lin
+            )
             tau = self.tau
             th_c += tau * w_r + 0.5 * tau * tau * wd_r
             w_c += tau * wd_r
@@ -502,36 +430,10 @@ class EsoSmcPlus:
         c1, c2 = self.c1, self.c2
         s = edd + c1 * ed + c2 * e  # = ė_ω + 2λ e_ω + λ² ∫e_ω (Eq. 26 fixed)
         self.s = s
-        d = self.delta
-        sat = 1.0 if s > d else (-1.0 if s < -d else self.k * s)  # Eq. 29
-        v = (self.eps * sat + wdd_r + c1 * edd + c2 * ed - z4) / self.b0  # Eq. 30 on θ‴
+        v = (self.eps * sat(s, self.delta, self.k) + wdd_r + c1 * edd + c2 * ed - z4) / self.b0
         if not self.angle_inputs:
             # anti-windup: the angle error is frozen while the valve saturates in e's direction
             if (e > 0.0 and v > self.v_hi) or (e < 0.0 and v < self.v_lo):
                 th_r = self.th_r + T * self.z2
             self.th_r = th_r
         return self._out(v)
-
-    def _predict4(self, z1, z2, z3, z4):
-        T, T2h, T3s, b0, u_n, to_lin = (
-            self.T,
-            self.T2h,
-            self.T3s,
-            self.b0,
-            self.u_n,
-            self.valve.to_linear,
-        )
-        pend = self.pending
-        if self.lin_id:  # no valve map: the deviation is the linearised command
-            for i in range(1, len(pend)):
-                jerk = z4 + b0 * (pend[i] - u_n)
-                z1 += T * z2 + T2h * z3 + T3s * jerk
-                z2 += T * z3 + T2h * jerk
-                z3 += T * jerk
-            return z1, z2, z3
-        for i in range(1, len(pend)):
-            jerk = z4 + b0 * to_lin(pend[i] - u_n)
-            z1 += T * z2 + T2h * z3 + T3s * jerk
-            z2 += T * z3 + T2h * jerk
-            z3 += T * jerk
-        return z1, z2, z3

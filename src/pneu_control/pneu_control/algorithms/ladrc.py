@@ -11,25 +11,58 @@ so that with z3 = f the loop is ÿ = u0: a critically damped pair at −λ1
 b0 error is small; we implement the gains as printed and leave the verdict to
 the twin (DESIGN §5). Units: mm or rpm; λ1 1/s; b0 (mm|rpm)/s²/V.
 
-The ESO is the exact-ZOH current observer of :mod:`pneu_control.observers.eso`
-(inlined here for speed, same arithmetic); it is fed the saturated command
-that was on the valve, so z3 never winds up.
+The ESO is the exact-ZOH current observer of :mod:`pneu_control.observers.eso`;
+it is fed the saturated command that was on the valve, so z3 never winds up.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from pneu_control.algorithms.base import NAN
-from pneu_control.controller.params import AxisControllerParams
-from pneu_control.observers.eso import eso_gains
+from pneu_msgs_py.params.core import param
 
-__all__ = ["Ladrc"]
+from pneu_control.algorithms.base import NAN, StepInput
+from pneu_control.algorithms.smc import (
+    POSITIVE,
+    b_0_field,
+    delay_compensation_field,
+    omega_0_field,
+)
+from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predict3
+
+if TYPE_CHECKING:
+    from pneu_control.controller.params import AxisControllerParams
+
+__all__ = ["Ladrc", "LadrcParams"]
+
+
+@dataclass(frozen=True)
+class LadrcParams:
+    """Linear ADRC (Gao 2003): linear ESO (Eq. 18, gains Eq. 17) and PD on the estimates.
+
+    u0 = λ1² (v1 − z1) + 2 λ1 (v2 − z2),  u = (u0 − z3) / b0.
+    λ1 is the controller bandwidth ω_c (critically damped PD). Paper: linear
+    λ1 390, ω0 31.5, b0 5900; rotary λ1 10, ω0 15, b0 500.
+    """
+
+    lambda_1: float = param(
+        390.0, unit="1/s", desc="controller bandwidth ω_c", **POSITIVE, source="paper"
+    )
+    omega_0: float = omega_0_field(31.5, "paper", "observer bandwidth ω0 (Eq. 17)")
+    b_0: float = b_0_field(5900.0, "paper")
+    accel_feedforward: bool = param(
+        False, desc="add the TD's reference acceleration v3 to u0 (not in the paper)"
+    )
+    delay_compensation: bool = delay_compensation_field()
 
 
 class Ladrc:
     name = "ladrc"
     uses_td = True
+    uses_theta = False
+    uses_pressures = False
 
     def __init__(self, params: AxisControllerParams, axis: str):
         p = params.ladrc
@@ -44,11 +77,9 @@ class Ladrc:
         lim = params.limits
         self.lo = lim.u_min - lim.u_neutral
         self.hi = lim.u_max - lim.u_neutral
-        # delay compensation: the controller attaches its command history (V, oldest first)
         self.dc = p.delay_compensation and params.transport_delay_samples > 0
         self.tau = params.transport_delay_samples * T
         self.u_n = lim.u_neutral
-        self.pending: list[float] = [lim.u_neutral] * (params.transport_delay_samples + 1)
         self.z1 = self.z2 = self.z3 = 0.0
         self.s = NAN
         self.u_raw = 0.0
@@ -58,41 +89,32 @@ class Ladrc:
     def hint(self) -> tuple[float, float, float]:
         return self.z1, self.z2, self.z3 + self.b0 * self.u_in
 
-    def start(self, y, r, r_dot, r_ddot, u_prev, u_applied, hint):
-        self.z1 = hint[0] if math.isfinite(hint[0]) else y
+    def start(self, inp: StepInput, u_prev, hint):
+        self.z1 = hint[0] if math.isfinite(hint[0]) else inp.y
         self.z2 = hint[1] if math.isfinite(hint[1]) else 0.0
         # z3 = ÿ − b0 u_applied: physically consistent (ÿ = 0 if unknown; cold start: 0)
         a = hint[2] if math.isfinite(hint[2]) else 0.0
-        self.u_in = u_applied
+        self.u_in = u_applied = inp.u_applied
         self.z3 = 0.0 if u_prev is None else a - self.b0 * u_applied
-        u0 = self.kp * (r - self.z1) + self.kd * (r_dot - self.z2) + self.ff * r_ddot
+        u0 = self.kp * (inp.r - self.z1) + self.kd * (inp.r_dot - self.z2) + self.ff * inp.r_ddot
         u = (u0 - self.z3) / self.b0
         self.u_raw = u
         return self.hi if u > self.hi else (self.lo if u < self.lo else u)
 
-    def update(self, y, r, r_dot, r_ddot, u_applied):
-        # ESO, Eq. 18 discretised (pneu_control.observers.eso.LinearEso.update)
+    def update(self, inp: StepInput):
         T = self.T
-        z2, z3 = self.z2, self.z3
-        self.u_in = u_applied
-        acc = z3 + self.b0 * u_applied
-        z1p = self.z1 + T * z2 + self.T2h * acc
-        z2p = z2 + T * acc
-        ey = y - z1p
-        z1 = z1p + self.l1 * ey
-        z2 = z2p + self.l2 * ey
-        z3 = z3 + self.l3 * ey
+        self.u_in = u_applied = inp.u_applied
+        z3 = self.z3
+        # ESO, Eq. 18 discretised (pneu_control.observers.eso)
+        z1, z2, z3 = eso3_step(
+            self.z1, self.z2, z3, z3 + self.b0 * u_applied, inp.y, T, self.T2h,
+            self.l1, self.l2, self.l3,
+        )  # fmt: skip
         self.z1, self.z2, self.z3 = z1, z2, z3
+        r, r_dot, r_ddot = inp.r, inp.r_dot, inp.r_ddot
         if self.dc:  # act on the state the command will meet: t + d T (see eso_smc)
-            T2h, b0, u_n = self.T2h, self.b0, self.u_n
-            pend = self.pending
-            for i in range(1, len(pend)):
-                acc = z3 + b0 * (pend[i] - u_n)
-                z1 += T * z2 + T2h * acc
-                z2 += T * acc
-            tau = self.tau
-            r += tau * r_dot + 0.5 * tau * tau * r_ddot
-            r_dot += tau * r_ddot
+            z1, z2 = predict3(z1, z2, z3, inp.history, self.u_n, self.b0, 0.0, T, self.T2h)
+            r, r_dot = extrapolate(r, r_dot, r_ddot, self.tau)
         u0 = self.kp * (r - z1) + self.kd * (r_dot - z2) + self.ff * r_ddot
         u = (u0 - z3) / self.b0
         self.u_raw = u

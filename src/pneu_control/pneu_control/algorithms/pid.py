@@ -20,16 +20,67 @@ V·s/rpm an unfiltered derivative would swing ±60 V per count, hence T_f.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from pneu_control.algorithms.base import NAN
-from pneu_control.controller.params import AxisControllerParams
+from pneu_msgs_py.params.core import param
 
-__all__ = ["Pid"]
+from pneu_control.algorithms.base import NAN, StepInput
+from pneu_control.algorithms.smc import NONNEGATIVE, POSITIVE
+
+if TYPE_CHECKING:
+    from pneu_control.controller.params import AxisControllerParams
+
+__all__ = ["Pid", "PidParams"]
+
+
+@dataclass(frozen=True)
+class PidParams:
+    """Parallel PID, u = u_n + Kp e + Ki ∫e dt + Kd ė_f (e = reference − measured).
+
+    Paper (Results): linear Kp 0.38, Ki 4.6, Kd 0.0128; rotary Kp 0.25,
+    Ki 0.22, Kd 0.004. The derivative is filtered (first order, time constant
+    ``tf``); the paper is silent on filtering (our choice, see DESIGN §8).
+    """
+
+    kp: float = param(
+        0.38, unit="V/mm | V/rpm", desc="proportional gain", **POSITIVE, source="paper"
+    )
+    ki: float = param(
+        4.6, unit="V/(mm·s) | V/(rpm·s)", desc="integral gain", **NONNEGATIVE, source="paper"
+    )
+    kd: float = param(
+        0.0128, unit="V·s/mm | V·s/rpm", desc="derivative gain", **NONNEGATIVE, source="paper"
+    )
+    tf: float = param(
+        0.002,
+        unit="s",
+        desc="derivative low-pass time constant (exact ZOH discretisation)",
+        **POSITIVE,
+    )
+    derivative_on: str = param(
+        "error", choices=("error", "measurement"), desc="differentiate the error or −measurement"
+    )
+    anti_windup: str = param(
+        "conditional",
+        choices=("conditional", "back_calculation", "none"),
+        desc="integrator anti-windup strategy",
+    )
+    tt: float = param(0.05, unit="s", desc="back-calculation tracking time constant", **POSITIVE)
+    y_filter_tf: float = param(
+        0.0,
+        unit="s",
+        desc="first-order low-pass on the raw measurement before P and D (0 = off)",
+        lo=0.0,
+        hi=1.0,
+    )
 
 
 class Pid:
     name = "pid"
     uses_td = False
+    uses_theta = False
+    uses_pressures = False
 
     def __init__(self, params: AxisControllerParams, axis: str):
         p = params.pid
@@ -50,13 +101,13 @@ class Pid:
         self.d = 0.0
         self.y_f = 0.0
         self.r_dot = 0.0
-        self.pending: list[float] = []  # command history (unused by PID)
 
     @property
     def hint(self) -> tuple[float, float, float]:
         return self.y_f, (self.r_dot - self.d if self.on_error else -self.d), NAN
 
-    def start(self, y, r, r_dot, r_ddot, u_prev, u_applied, hint):
+    def start(self, inp: StepInput, u_prev, hint):
+        y, r, r_dot = inp.y, inp.r, inp.r_dot
         self.y_f = y
         self.r_dot = r_dot
         yd = hint[1] if math.isfinite(hint[1]) else 0.0
@@ -71,7 +122,8 @@ class Pid:
         self.u_raw = u
         return self.hi if u > self.hi else (self.lo if u < self.lo else u)
 
-    def update(self, y, r, r_dot, r_ddot, u_applied):
+    def update(self, inp: StepInput):
+        y, r_dot = inp.y, inp.r_dot
         T = self.T
         y_prev = self.y_f
         y_f = y_prev + self.a_y * (y - y_prev)
@@ -82,7 +134,7 @@ class Pid:
         a = self.a_d
         d = a * self.d + (1.0 - a) * d_in
         self.d = d
-        e = r - y_f
+        e = inp.r - y_f
         di = self.ki * e * T
         integral = self.integral + di
         u = self.kp * e + integral + self.kd * d

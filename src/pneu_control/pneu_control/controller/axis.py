@@ -10,8 +10,11 @@ in-process runner. Per :class:`~pneu_msgs_py.contract.samples.SensorSample` it
 3. runs the tracking differentiator (Eq. 23–24) on the reference every sample
    when ``td.enabled`` (cold start at the measurement: a soft start); LADRC and
    ESO-SMC take its (v1, v2, v3), PID the analytic (r, ṙ, r̈);
-4. calls the algorithm, which returns the saturated deviation from the
-   neutral voltage, and returns neutral + deviation (V, within [u_min, u_max]).
+4. fills one :class:`~pneu_control.algorithms.base.StepInput` (measurement,
+   reference, the command on the valve, the command history, the encoder
+   angle and chamber pressures), calls the algorithm, which returns the
+   saturated deviation from the neutral voltage, and returns neutral +
+   deviation (V, within [u_min, u_max]).
 
 Rotary ``rotary_model``: ``speed`` (default, the brief's reading): y = ω (rpm),
 ÿ = f + b0 u (valve → pressure → torque makes the speed second order in u).
@@ -21,8 +24,9 @@ rpm) with θ̈ = f + b0 u (b0 in rpm/s/V) and the reference θ_r = ∫v1 dt
 (trapezoid, started at the measured angle), ṙ = v1, r̈ = v2; PID stays on the
 speed. Observer states are then θ, ω, ω̇-disturbance (rad, rad/s, rad/s²).
 Algorithms with ``uses_theta`` (ESO-SMC+'s angle observer) also get the
-encoder angle ``sample.theta`` in rpm·s as their attribute ``theta`` before
-each call, whatever ``rotary_model`` is.
+encoder angle ``sample.theta`` in rpm·s (``StepInput.theta``), whatever
+``rotary_model`` is; for them a non-finite angle is held like a non-finite
+measurement.
 
 ``set_params`` validates the whole new set (including the reference and its
 waypoint file) before anything changes; the new set takes effect at the next
@@ -48,6 +52,7 @@ from pneu_msgs_py.contract.topics import DEFAULT_STATE_FIELDS
 from pneu_msgs_py.params.core import ParamError, validate
 
 from pneu_control.algorithms import make_algorithm
+from pneu_control.algorithms.base import StepInput
 from pneu_control.controller.params import AxisControllerParams
 from pneu_control.controller.references import axis_scale, make_reference
 from pneu_control.observers.td import TrackingDifferentiator
@@ -177,12 +182,11 @@ class AxisController:
         self._t0_ns: int | None = None
         self._started = False
         self._u_hist = [self._neutral] * (self._delay + 1)  # V, oldest first
-        self._alg.pending = self._u_hist
+        self._inp = StepInput(history=self._u_hist)  # the algorithms' input, filled per sample
         self._u_last = self._neutral
         self._blend = 0.0  # V, decaying bumpless offset
         self._t = 0.0
         self._th_r = self._v1_prev = 0.0  # rotary angle mode: θ_r and the last v1
-        self._theta = 0.0  # encoder angle (rpm·s) for algorithms with uses_theta
         self._r = self._rd = self._y = _NAN
         self._dirty = True
         self.n_nonfinite = 0
@@ -211,18 +215,16 @@ class AxisController:
                 return self._u_last
         y = y_si * k
         rp, rdp, rddp = r * k, rd * k, rdd * k
-        if getattr(self._alg, "uses_theta", False) or (
-            self._pending is not None and getattr(self._pending[2], "uses_theta", False)
-        ):  # an angle-observer algorithm (ESO-SMC+) reads the encoder angle, rpm·s
+        inp = self._inp
+        if self._alg.uses_theta or (self._pending is not None and self._pending[2].uses_theta):
+            # an angle-observer algorithm (ESO-SMC+) reads the encoder angle, rpm·s
             th_a = sample.theta * k
             if not (-1e300 < th_a < 1e300):
                 self.n_nonfinite += 1
                 return self._u_last
-            self._theta = th_a
-            self._alg.theta = th_a
-        if getattr(self._alg, "uses_pressures", False):  # chamber pressures, Pa abs
-            self._alg.p_c1, self._alg.p_c2 = sample.p_c1, sample.p_c2
-        self._p_c = (sample.p_c1, sample.p_c2)
+            inp.theta = th_a
+        inp.p_c1 = sample.p_c1  # chamber pressures, Pa abs (read by uses_pressures algorithms)
+        inp.p_c2 = sample.p_c2
         if self._pending is not None or not self._started:
             return self._switch(y, th, rp, rdp, rddp)
         if self._td_on:  # the TD runs on the reference whatever the algorithm
@@ -243,7 +245,9 @@ class AxisController:
             v1, v2, v3 = rp, rdp, rddp
         hist = self._u_hist
         neutral = self._neutral
-        u = alg.update(y, v1, v2, v3, hist[0] - neutral) + neutral
+        inp.y, inp.r, inp.r_dot, inp.r_ddot = y, v1, v2, v3
+        inp.u_applied = hist[0] - neutral
+        u = alg.update(inp) + neutral
         if self._blend != 0.0:
             u = self._blended(u)
         del hist[0]
@@ -265,13 +269,17 @@ class AxisController:
         self._u_last = u
         return u
 
-    def _inputs(self, alg, y, th, rp, rdp, rddp, v1, v2, v3):
-        """(y, r, ṙ, r̈) for ``alg``: TD output or raw reference; angle or speed domain."""
+    def _inputs(self, alg, y, th, rp, rdp, rddp, v1, v2, v3, u_applied) -> StepInput:
+        """The step input for ``alg``: TD output or raw reference; angle or speed domain."""
+        inp = self._inp
         if self._angle and alg.uses_td:
-            return th, self._th_r, v1, v2
-        if alg.uses_td:
-            return y, v1, v2, v3
-        return y, rp, rdp, rddp
+            inp.y, inp.r, inp.r_dot, inp.r_ddot = th, self._th_r, v1, v2
+        elif alg.uses_td:
+            inp.y, inp.r, inp.r_dot, inp.r_ddot = y, v1, v2, v3
+        else:
+            inp.y, inp.r, inp.r_dot, inp.r_ddot = y, rp, rdp, rddp
+        inp.u_applied = u_applied
+        return inp
 
     def _switch(self, y, th, rp, rdp, rddp) -> float:
         """Cold start, or apply the pending set bumplessly (see module docstring)."""
@@ -293,7 +301,7 @@ class AxisController:
                 self._th_r += 0.5 * self._T * (self._v1_prev + v1)
                 self._v1_prev = v1
             old_alg.update(
-                *self._inputs(old_alg, y, th, rp, rdp, rddp, v1, v2, v3), u_applied_v - n_old
+                self._inputs(old_alg, y, th, rp, rdp, rddp, v1, v2, v3, u_applied_v - n_old)
             )
             hint = old_alg.hint
         if self._pending is not None:
@@ -307,11 +315,6 @@ class AxisController:
             rp, rdp, rddp = r_si * k, rd_si * k, rdd_si * k
             td.r, td.h = params.td.r, params.td.h
         new_alg = self._alg
-        new_alg.pending = self._u_hist
-        if getattr(new_alg, "uses_theta", False):
-            new_alg.theta = self._theta
-        if getattr(new_alg, "uses_pressures", False):
-            new_alg.p_c1, new_alg.p_c2 = self._p_c
         if not started:  # cold start: TD from the measured speed/position (soft start)
             td.reset(y, 0.0)
             if self._td_on:
@@ -319,8 +322,8 @@ class AxisController:
             v1, v2, v3 = (td.v1, td.v2, td.v3) if self._td_on else (rp, rdp, rddp)
             self._th_r, self._v1_prev = th, v1
             self._started = True
-            inputs = self._inputs(new_alg, y, th, rp, rdp, rddp, v1, v2, v3)
-            return self._finish(new_alg.start(*inputs, None, 0.0, (_NAN, _NAN, _NAN)))
+            inp = self._inputs(new_alg, y, th, rp, rdp, rddp, v1, v2, v3, 0.0)
+            return self._finish(new_alg.start(inp, None, (_NAN, _NAN, _NAN)))
         if self._td_on:
             if not self._td_was_on:  # TD just enabled: start it on the reference
                 td.reset(rp - 2.0 * td.h * rdp, rdp)  # fhan's steady ramp lag is 2h
@@ -330,9 +333,9 @@ class AxisController:
             v1, v2, v3 = rp, rdp, rddp
         if self._angle and old_alg.uses_td != new_alg.uses_td:  # speed ↔ angle domain
             hint = (th, hint[0], hint[1]) if new_alg.uses_td else (hint[1], hint[2], _NAN)
-        inputs = self._inputs(new_alg, y, th, rp, rdp, rddp, v1, v2, v3)
         n = self._neutral
-        u_new = new_alg.start(*inputs, self._u_last - n, u_applied_v - n, hint) + n
+        inp = self._inputs(new_alg, y, th, rp, rdp, rddp, v1, v2, v3, u_applied_v - n)
+        u_new = new_alg.start(inp, self._u_last - n, hint) + n
         # bumpless: the first command equals the last one; the offset then decays
         self._blend = (self._u_last - u_new) / self._a_blend  # _blended() decays it once
         return self._finish(self._blended(u_new) - n)

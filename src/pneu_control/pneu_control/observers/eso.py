@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["eso_gains", "eso_error_matrix", "LinearEso"]
+__all__ = ["eso_gains", "eso_error_matrix", "eso3_step", "predict3", "extrapolate", "LinearEso"]
 
 
 def eso_gains(omega_0: float, T: float) -> tuple[float, float, float]:
@@ -50,6 +50,62 @@ def eso_error_matrix(omega_0: float, T: float) -> list[list[float]]:
     phi = [[1.0, T, 0.5 * T * T], [0.0, 1.0, T], [0.0, 0.0, 1.0]]
     lc = [l1, l2, l3]
     return [[phi[i][j] - lc[i] * phi[0][j] for j in range(3)] for i in range(3)]
+
+
+def eso3_step(
+    z1: float,
+    z2: float,
+    z3: float,
+    acc: float,
+    y: float,
+    T: float,
+    T2h: float,
+    l1: float,
+    l2: float,
+    l3: float,
+) -> tuple[float, float, float]:
+    """One step of the current observer (Eq. 18, exact ZOH); the fast path every algorithm uses.
+
+    ``acc`` = z3 + b0 u + f_k: the modelled acceleration over the last period
+    (the caller adds the input and known parts it has); ``T2h`` = T²/2.
+    Predict z⁻ = Φ z + Γ acc, correct with y(k): returns (z1, z2, z3).
+    """
+    z1p = z1 + T * z2 + T2h * acc
+    z2p = z2 + T * acc
+    ey = y - z1p
+    return z1p + l1 * ey, z2p + l2 * ey, z3 + l3 * ey
+
+
+def predict3(
+    z1: float,
+    z2: float,
+    z3: float,
+    history: list[float],
+    u_n: float,
+    b0: float,
+    f_k: float,
+    T: float,
+    T2h: float,
+    to_linear=None,
+) -> tuple[float, float]:
+    """(z1, z2) run over the transport delay with the commands already sent (Smith predictor).
+
+    ``history``: commands in V, oldest first (the one on the valve during the
+    last period, then the d commands in the pipe); the model acceleration
+    over each is z3 + b0 (u − u_n) + f_k, with ``to_linear`` applied to the
+    deviation when the algorithm linearises the valve.
+    """
+    for i in range(1, len(history)):
+        du = history[i] - u_n
+        acc = z3 + b0 * (du if to_linear is None else to_linear(du)) + f_k
+        z1 += T * z2 + T2h * acc
+        z2 += T * acc
+    return z1, z2
+
+
+def extrapolate(r: float, r_dot: float, r_ddot: float, tau: float) -> tuple[float, float]:
+    """(r, ṙ) at t + τ from the reference and its derivatives at t (second order)."""
+    return r + tau * r_dot + 0.5 * tau * tau * r_ddot, r_dot + tau * r_ddot
 
 
 class LinearEso:
@@ -73,10 +129,6 @@ class LinearEso:
     def update(self, y: float, u: float, f_k: float = 0.0) -> None:
         T = self.T
         acc = self.z3 + self.b0 * u + f_k
-        z2 = self.z2
-        z1p = self.z1 + T * z2 + 0.5 * T * T * acc  # predict, exact ZOH
-        z2p = z2 + T * acc
-        e = y - z1p  # correct with y(k)
-        self.z1 = z1p + self.l1 * e
-        self.z2 = z2p + self.l2 * e
-        self.z3 = self.z3 + self.l3 * e
+        self.z1, self.z2, self.z3 = eso3_step(
+            self.z1, self.z2, self.z3, acc, y, T, 0.5 * T * T, self.l1, self.l2, self.l3
+        )
