@@ -226,8 +226,8 @@ def test_driver_node_with_the_twin_behind_the_daq_publishes_forwards_and_ends_sa
     import yaml
     from pneu_driver.daq.backend import SimBackend
     from pneu_msgs_py.params.paths import config_file
-    from pneu_sim.physics.params import load_plant
     from pneu_sim.physics.plant import Plant
+    from pneu_sim.physics.plant_file import load_plant
     from rclpy.executors import SingleThreadedExecutor
 
     rig = yaml.safe_load(config_file("rig.yaml").read_text())

@@ -122,7 +122,7 @@ def _groups(quick: bool) -> dict[str, Callable[[], dict[str, Any]]]:
         return bag_bench.analysis_figures(minutes=minutes)
 
     def shell() -> dict[str, Any]:
-        from pneu_control.nodes.controller_core import bench_shell_us_per_sample
+        from pneu_control.bench.shell import bench_shell_us_per_sample
 
         return {"shell_us_per_sample": bench_shell_us_per_sample()}
 

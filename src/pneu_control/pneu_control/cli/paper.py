@@ -63,7 +63,7 @@ def _series(result, exp: Experiment, label: str, m) -> Series:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pneu_sim.physics.params import load_plant
+    from pneu_sim.physics.plant_file import load_plant
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -82,7 +82,7 @@ def retuned_document(
 
 
 def run(args: argparse.Namespace) -> int:
-    from pneu_sim.physics.params import load_plant
+    from pneu_sim.physics.plant_file import load_plant
 
     plant = load_plant(args.plant)
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)

@@ -36,7 +36,7 @@ def safety_metadata(echo: dict[str, Any]) -> dict[str, str]:
             "unsafe_overrides": "",
             "params_json": "",
         }
-    from pneu_driver.safety.supervisor import SafetyParams
+    from pneu_driver.safety import SafetyParams
     from pneu_msgs_py.params.core import from_dict
 
     overrides = from_dict(SafetyParams, safety, strict=False).unsafe_overrides()

@@ -38,7 +38,7 @@ _MEASURED = {"linear": "x", "rotary": "omega"}
 
 
 def _default_safety() -> Any:
-    from pneu_driver.safety.supervisor import SafetyParams
+    from pneu_driver.safety import SafetyParams
 
     return SafetyParams()
 
@@ -184,7 +184,7 @@ def run(
 
     sup = None
     if spec.safety is not None:
-        from pneu_driver.safety.supervisor import SafetySupervisor
+        from pneu_driver.safety import SafetySupervisor
 
         sup = SafetySupervisor(spec.safety, sample_time_s=period)
     cycle = RigCycle(
@@ -196,7 +196,7 @@ def run(
 
     def controller_failed(axis: str, err: BaseException, stamp: int) -> None:
         crashed[axis] = f"{type(err).__name__}: {err}"
-        from pneu_driver.safety.supervisor import ERROR, SafetyEvent
+        from pneu_driver.safety import ERROR, SafetyEvent
 
         ev = SafetyEvent(
             stamp,

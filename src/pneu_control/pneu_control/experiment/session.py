@@ -96,7 +96,7 @@ def build_spec(
     ``config/safety.yaml``); False = no supervisor; or a ``SafetyParams``.
     """
     from pneu_sim.faults.injection import parse_faults
-    from pneu_sim.physics.params import load_plant
+    from pneu_sim.physics.plant_file import load_plant
 
     plant_params = plant if plant is not None else load_plant(plant_file)
     per_axis = parse_sets(sets, axes)
@@ -116,7 +116,7 @@ def build_spec(
         windows[axis] = window_for(axis, params.reference, window_start_s)
     fault_specs = parse_faults(faults)
     if safety is True:
-        from pneu_driver.safety.supervisor import load_safety_params
+        from pneu_driver.safety import load_safety_params
 
         safety_params = load_safety_params(safety_file)
     elif safety is False or safety is None:

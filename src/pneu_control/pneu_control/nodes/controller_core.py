@@ -19,8 +19,6 @@ lockstep ROS run gives the runner's numbers.
 
 from __future__ import annotations
 
-import math
-import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -40,7 +38,6 @@ __all__ = [
     "SENSOR_TOPICS",
     "SampleAssembler",
     "ControllerShellCore",
-    "bench_shell_us_per_sample",
 ]
 
 #: The five topics one sample is published on, in the order the sim and driver publish them.
@@ -213,40 +210,3 @@ def _new(types: Mapping[str, Any], name: str) -> Any:
         return cls(header=header, fluid_pressure=0.0, variance=0.0)
     empty = np.zeros(0)
     return cls(header=header, name=[], position=empty, velocity=empty, effort=empty)
-
-
-def bench_shell_us_per_sample(n: int = 5000, axis: str = "linear") -> float:
-    """Microseconds per sample of a controller shell's work, without rclpy.
-
-    Five sensor messages in (rosbags Jazzy classes standing in for rclpy's),
-    sample rebuilt, ``AxisController.update`` (the configured algorithm;
-    ESO-SMC in config/controllers.yaml) and the command and state messages
-    filled. rclpy's own cost (take, deserialise, publish, serialise) is not
-    included: that needs ROS (see the README's ROS 2 section).
-    """
-    from pneu_msgs_py.contract.convert import typestore_messages
-    from pneu_sim.nodes.sim_core import fill_sample_messages
-
-    from pneu_control.controller.params import load_controller_params
-
-    types = typestore_messages().types
-    core = ControllerShellCore(axis, load_controller_params(axis))
-    ticks = []  # built beforehand: only the shell's work is timed
-    for k in range(n):
-        msgs = new_sensor_messages(types)
-        x = 0.02 * math.sin(2.0 * math.pi * 0.25 * k * 1e-3)
-        s = SensorSample(k, k * 1_000_000, 2.0e5, 2.1e5, 1.5e5, x, 0.01 * k, 10.0, k)
-        fill_sample_messages(msgs, s)
-        ticks.append(msgs)
-    cmd = _new(types, "sensor_msgs/msg/JointState")
-    state = _new(types, "sensor_msgs/msg/JointState")
-    step = core.step
-    topics = SENSOR_TOPICS
-    t0 = time.perf_counter()
-    for msgs in ticks:
-        for topic in topics:
-            step(topic, msgs[topic], cmd, state)
-    dt = time.perf_counter() - t0
-    if core.n_samples != n:
-        raise RuntimeError(f"shell bench: {core.n_samples} of {n} samples computed")
-    return dt / n * 1e6

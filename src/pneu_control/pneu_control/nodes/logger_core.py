@@ -117,7 +117,7 @@ def run_config_from_params(node_params: Mapping[str, Mapping[str, Any]]) -> dict
             mode=sim.get("mode"),
         )
         try:
-            from pneu_sim.physics.params import load_plant
+            from pneu_sim.physics.plant_file import load_plant
 
             out["plant"] = to_dict(load_plant(sim.get("plant_file") or None))
         except (OSError, ValueError) as err:
@@ -134,7 +134,7 @@ def run_config_from_params(node_params: Mapping[str, Mapping[str, Any]]) -> dict
         out["safety"] = None
         if run_node.get("safety", True):  # the driver always has its supervisor
             try:
-                from pneu_driver.safety.supervisor import load_safety_params
+                from pneu_driver.safety import load_safety_params
 
                 out["safety"] = to_dict(load_safety_params(run_node.get("safety_file") or None))
             except (OSError, ValueError) as err:

@@ -122,7 +122,7 @@ def run_loopback(
     types = wire.ts.types
     plant = Plant(spec.plant, seed=spec.seed)
     if supervisor is None and spec.safety is not None:
-        from pneu_driver.safety.supervisor import SafetySupervisor
+        from pneu_driver.safety import SafetySupervisor
 
         supervisor = SafetySupervisor(spec.safety, sample_time_s=plant.T)
     core = RigCycle(

@@ -25,7 +25,7 @@ from pneu_msgs_py.params.core import with_updates
 from pneu_driver.daq.backend import SimBackend, SteppablePlant
 from pneu_driver.daq.rig import RigParams
 from pneu_driver.loop.driver_loop import DriverLoop
-from pneu_driver.safety.supervisor import SafetyParams, SafetySupervisor
+from pneu_driver.safety import SafetyParams, SafetySupervisor
 
 __all__ = ["TrivialPlant", "loop_pacing"]
 

@@ -41,7 +41,7 @@ from pneu_driver.daq.errors import DriverError, LateCycleError
 from pneu_driver.daq.rig import RigParams
 from pneu_driver.daq.scaling import RawSample, Scaler
 from pneu_driver.loop.rt import enable_realtime
-from pneu_driver.safety.supervisor import SAFE_V, AxisStatus, SafetyEvent, SafetySupervisor
+from pneu_driver.safety import SAFE_V, AxisStatus, SafetyEvent, SafetySupervisor
 
 __all__ = ["CommandSlot", "LoopStats", "DriverLoop"]
 

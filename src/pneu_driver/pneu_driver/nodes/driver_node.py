@@ -48,7 +48,7 @@ from std_srvs.srv import Trigger
 from pneu_driver.daq.nidaqmx_backend import NidaqmxBackend, visible_devices
 from pneu_driver.daq.rig import load_rig_params
 from pneu_driver.loop.driver_loop import DriverLoop
-from pneu_driver.safety.supervisor import load_safety_params
+from pneu_driver.safety import load_safety_params
 
 SENSOR_TOPICS = (*PRESSURE_TOPICS, JOINT_STATE_TOPIC["linear"], JOINT_STATE_TOPIC["rotary"])
 _LEVEL = {"OK": 0, "WARN": 1, "ERROR": 2}
@@ -93,7 +93,7 @@ class DriverNode(ShellDefaults, Node):
             from pneu_driver.daq.errors import DaqUnavailableError
 
             raise DaqUnavailableError(rig.device, seen)
-        from pneu_driver.safety.supervisor import SafetySupervisor
+        from pneu_driver.safety import SafetySupervisor
 
         self.msgs = {
             t: FluidPressure() if t in PRESSURE_TOPICS else JointState() for t in SENSOR_TOPICS

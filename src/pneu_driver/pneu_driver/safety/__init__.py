@@ -1,1 +1,33 @@
-"""The safety supervisor shared by the runner, the sim node and the driver, and its parameters."""
+"""The safety supervisor shared by the runner, the sim node and the driver, and its parameters.
+
+- :mod:`.params` -- ``SafetyParams`` (``config/safety.yaml``) and its loader;
+- :mod:`.events` -- levels, ``SafetyEvent`` transitions and ``AxisStatus``;
+- :mod:`.supervisor` -- ``SafetySupervisor``, the per-axis state machine.
+"""
+
+from pneu_driver.safety.events import (
+    ERROR,
+    LEVEL_BYTE,
+    OK,
+    SAFE_V,
+    SENSOR_AXIS,
+    WARN,
+    AxisStatus,
+    SafetyEvent,
+)
+from pneu_driver.safety.params import SafetyParams, load_safety_params
+from pneu_driver.safety.supervisor import SafetySupervisor
+
+__all__ = [
+    "ERROR",
+    "LEVEL_BYTE",
+    "OK",
+    "SAFE_V",
+    "SENSOR_AXIS",
+    "WARN",
+    "AxisStatus",
+    "SafetyEvent",
+    "SafetyParams",
+    "SafetySupervisor",
+    "load_safety_params",
+]

@@ -34,9 +34,8 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from pneu_msgs_py.bag.cdr import CdrDecodeError
+from pneu_msgs_py.bag.columns import Collector
 from pneu_msgs_py.bag.decode import FIXED_TYPES, ChannelDecoder, Piece
 from pneu_msgs_py.bag.errors import (
     BagError,
@@ -49,6 +48,7 @@ from pneu_msgs_py.bag.errors import (
     UnknownSchemaError,
 )
 from pneu_msgs_py.bag.mcap_file import CorruptBagError, McapFile, walk_offsets
+from pneu_msgs_py.bag.run_data import RunData, TopicArrays
 from pneu_msgs_py.contract.qos import QosProfile, parse_offered_qos_yaml
 
 __all__ = [
@@ -62,73 +62,6 @@ __all__ = [
 ]
 
 KNOWN_TYPES = (*FIXED_TYPES, "diagnostic_msgs/msg/DiagnosticArray")
-
-
-@dataclass
-class TopicArrays:
-    """All messages of one topic as arrays (see module docstring for field names)."""
-
-    topic: str
-    ros_type: str
-    stamp_ns: np.ndarray
-    log_time_ns: np.ndarray
-    publish_time_ns: np.ndarray
-    fields: dict[str, np.ndarray]
-    frame_ids: tuple[str, ...]  # distinct frame ids, in order of first appearance
-    frame_code: np.ndarray | None  # index into frame_ids per message (None: only one)
-    names: tuple[str, ...] = ()  # JointState joint names (union, first-seen order)
-    objects: list | None = None
-    qos: list[QosProfile] = field(default_factory=list)
-
-    def __len__(self) -> int:
-        return len(self.log_time_ns)
-
-    def __getitem__(self, key: str) -> np.ndarray:
-        if key in ("stamp_ns", "log_time_ns", "publish_time_ns"):
-            return getattr(self, key)
-        try:
-            return self.fields[key]
-        except KeyError:
-            raise KeyError(
-                f"{self.topic} has no field {key!r}; fields: {sorted(self.fields)}"
-            ) from None
-
-    def __contains__(self, key: object) -> bool:
-        return key in self.fields or key in ("stamp_ns", "log_time_ns", "publish_time_ns")
-
-    def keys(self) -> list[str]:
-        return ["stamp_ns", "log_time_ns", "publish_time_ns", *self.fields]
-
-    @property
-    def frame_id(self) -> np.ndarray:
-        """Per-message header.frame_id (str array)."""
-        fr = np.array(self.frame_ids or ("",))
-        if self.frame_code is None:
-            return np.repeat(fr[:1], len(self))
-        return fr[self.frame_code]
-
-
-@dataclass
-class RunData:
-    """A run read back: metadata records, per-topic arrays, warnings."""
-
-    metadata: dict[str, dict[str, str]]
-    topics: dict[str, TopicArrays]
-    warnings: list[str] = field(default_factory=list)
-    path: str = ""
-    skipped: dict[str, str] = field(default_factory=dict)  # topic -> type not decoded
-
-    def __getitem__(self, topic: str) -> TopicArrays:
-        try:
-            return self.topics[topic]
-        except KeyError:
-            raise MissingTopicError(
-                self.path, f"topic {topic} not read; topics: {', '.join(sorted(self.topics))}"
-            ) from None
-
-    @property
-    def message_count(self) -> int:
-        return sum(len(t) for t in self.topics.values())
 
 
 def bag_files(path: str | os.PathLike) -> tuple[list[Path], list[str]]:
@@ -164,316 +97,6 @@ def bag_files(path: str | os.PathLike) -> tuple[list[Path], list[str]]:
     if not p.exists():
         raise NotMcapError(p, "no such file or directory")
     return [p], warn
-
-
-def _all_equal(v: np.ndarray, c) -> bool:
-    """Every element equals ``c`` (NaN equals NaN)."""
-    if c != c:  # NaN
-        return bool(np.isnan(v).all())
-    return bool((v == c).all())
-
-
-class _Column:
-    """A growing column that stays a single value while the data allow (no memory)."""
-
-    __slots__ = ("arr", "cap", "const", "dtype", "has_const", "n")
-
-    def __init__(self, dtype, capacity: int, n: int = 0, fill=None) -> None:
-        self.dtype = np.dtype(dtype)
-        self.cap = max(int(capacity), 16)
-        self.n = n
-        self.arr: np.ndarray | None = None
-        self.const = fill
-        self.has_const = n > 0
-
-    def _materialize(self, need: int) -> None:
-        self.cap = max(self.cap, need)
-        arr = np.empty(self.cap, dtype=self.dtype)
-        if self.n:
-            arr[: self.n] = self.const
-        self.arr = arr
-
-    def _ensure(self, need: int) -> None:
-        if need > self.cap:
-            self.cap = max(need, 2 * self.cap)
-            arr = np.empty(self.cap, dtype=self.dtype)
-            arr[: self.n] = self.arr[: self.n]
-            self.arr = arr
-
-    def append(self, v: np.ndarray) -> None:
-        k = len(v)
-        if not k:
-            return
-        if self.arr is None:
-            if not self.has_const:
-                c = v[0]
-                if _all_equal(v, c):
-                    self.const, self.has_const = c, True
-                    self.n += k
-                    return
-            elif _all_equal(v, self.const):
-                self.n += k
-                return
-            self._materialize(self.n + k)
-        self._ensure(self.n + k)
-        self.arr[self.n : self.n + k] = v
-        self.n += k
-
-    def append_const(self, c, k: int) -> None:
-        if self.arr is None and (
-            not self.has_const or self.const == c or (c != c and self.const != self.const)
-        ):
-            self.const, self.has_const = c, True
-            self.n += k
-            return
-        if self.arr is None:
-            self._materialize(self.n + k)
-        self._ensure(self.n + k)
-        self.arr[self.n : self.n + k] = c
-        self.n += k
-
-    def head(self, n: int):
-        """The first ``n`` values (an array, or the single value)."""
-        return self.arr[:n] if self.arr is not None else self.const
-
-    def result(self) -> np.ndarray:
-        """The column; a read-only broadcast view if it held one value throughout."""
-        if self.arr is None:
-            return np.broadcast_to(np.asarray(self.const, dtype=self.dtype), (self.n,))
-        out = self.arr[: self.n]
-        if self.cap > self.n + self.n // 8:
-            out = out.copy()  # do not keep a large unused capacity alive
-        self.arr = None
-        return out
-
-
-def _own_copy(base, n: int, cap: int) -> _Column:
-    """A materialised int64 column holding ``base``'s first ``n`` values."""
-    col = _Column(np.int64, max(cap, n))
-    if n:
-        col.arr = np.empty(col.cap, dtype=np.int64)
-        col.arr[:n] = base.head(n)
-        col.n = n
-    return col
-
-
-class _TimeColumn:
-    """An int64 time column that is stored only if it differs from the log time."""
-
-    __slots__ = ("base", "col", "n")
-
-    def __init__(self, base) -> None:
-        self.base = base
-        self.col: _Column | None = None
-        self.n = 0
-
-    def append(self, v: np.ndarray, base_chunk: np.ndarray) -> None:
-        if self.col is None:
-            if np.array_equal(v, base_chunk):
-                self.n += len(v)
-                return
-            self.col = _own_copy(self.base, self.n, self.base.cap)
-        self.col.append(v)
-        self.n += len(v)
-
-
-class _SharedLogTime:
-    """A topic's log times kept as a view of another topic's while they are identical.
-
-    At 1 kHz every topic of a cycle carries the same stamp: one array serves them all.
-    The master topic's chunk is appended first (see :func:`_add_results`).
-    """
-
-    __slots__ = ("cap", "col", "master", "n")
-
-    def __init__(self, master: _Column, capacity: int) -> None:
-        self.master = master
-        self.col: _Column | None = None
-        self.n = 0
-        self.cap = max(int(capacity), 16)
-
-    def append(self, v: np.ndarray) -> None:
-        k = len(v)
-        if self.col is None:
-            m = self.master
-            if m.n >= self.n + k and (
-                np.array_equal(m.arr[self.n : self.n + k], v)
-                if m.arr is not None
-                else _all_equal(v, m.const)
-            ):
-                self.n += k
-                return
-            self.col = _own_copy(m, self.n, self.cap)
-        self.col.append(v)
-        self.n += k
-
-    def head(self, n: int):
-        return self.col.head(n) if self.col is not None else self.master.head(n)
-
-
-def _merge_pieces(pieces: list[Piece]) -> Piece:
-    """Several pieces of one chunk and channel -> one, in message-index order."""
-    # pieces in order of their first message, so names and fields are first-seen ordered
-    pieces = sorted(pieces, key=lambda p: int(p.order_key.min()) if len(p) else 0)
-    key = np.concatenate([p.order_key for p in pieces])
-    order = np.argsort(key, kind="stable")
-    keys: list[str] = []
-    names: list[str] = []
-    for p in pieces:
-        keys += [k for k in p.fields if k not in keys]
-        names += [nm for nm in p.names if nm not in names]
-    fields = {
-        k: np.concatenate([p.fields.get(k, np.full(len(p), np.nan)) for p in pieces])[order]
-        for k in keys
-    }
-    frames = [
-        fr
-        for p in pieces
-        for fr in (p.frame_ids if len(p.frame_ids) == len(p) else p.frame_ids * len(p))
-    ]
-    objects = None
-    if any(p.objects is not None for p in pieces):
-        objs = [o for p in pieces for o in (p.objects or [None] * len(p))]
-        objects = [objs[i] for i in order]
-    return Piece(
-        np.concatenate([p.log_time for p in pieces])[order],
-        np.concatenate([p.publish_time for p in pieces])[order],
-        np.concatenate([p.stamp for p in pieces])[order],
-        fields,
-        [frames[i] for i in order],
-        tuple(names),
-        objects,
-        key[order],
-    )
-
-
-class _Collector:
-    """One topic's columns, filled chunk by chunk (preallocated from the file's statistics)."""
-
-    def __init__(
-        self,
-        topic: str,
-        ros_type: str,
-        qos: list[QosProfile],
-        capacity: int,
-        master: _Collector | None = None,
-    ) -> None:
-        self.topic = topic
-        self.ros_type = ros_type
-        self.qos = qos
-        self.capacity = capacity
-        self.master = master
-        self.log = (
-            _Column(np.int64, capacity) if master is None else _SharedLogTime(master.log, capacity)
-        )
-        self.pub = _TimeColumn(self.log)
-        self.stamp = _TimeColumn(self.log)
-        self.fields: dict[str, _Column] = {}
-        self.codes = _Column(np.int32, capacity)
-        self.frames: list[str] = []
-        self.names: list[str] = []
-        self.objects: list | None = None
-        self.n = 0
-        self.sorted = True
-        self.last = None
-
-    def add(self, pieces: list[Piece]) -> None:
-        if not pieces:
-            return
-        p = pieces[0] if len(pieces) == 1 else _merge_pieces(pieces)
-        k = len(p)
-        if not k:
-            return
-        lt = p.log_time
-        if self.sorted and (
-            (self.last is not None and lt[0] < self.last)
-            or (k > 1 and bool((lt[1:] < lt[:-1]).any()))
-        ):
-            self.sorted = False
-        self.last = int(lt[-1]) if self.last is None else max(self.last, int(lt[-1]))
-        self.log.append(lt)
-        self.pub.append(p.publish_time, lt)
-        self.stamp.append(p.stamp, lt)
-        for nm in p.names:
-            if nm not in self.names:
-                self.names.append(nm)
-        for key, v in p.fields.items():
-            col = self.fields.get(key)
-            if col is None:
-                col = self.fields[key] = _Column(np.float64, self.capacity, self.n, np.nan)
-            col.append(v)
-        for key, col in self.fields.items():
-            if key not in p.fields:
-                col.append_const(np.nan, k)
-        if len(p.frame_ids) == 1:
-            fr = p.frame_ids[0]
-            if fr not in self.frames:
-                self.frames.append(fr)
-            self.codes.append_const(self.frames.index(fr), k)
-        else:
-            for fr in dict.fromkeys(p.frame_ids):
-                if fr not in self.frames:
-                    self.frames.append(fr)
-            idx = {fr: i for i, fr in enumerate(self.frames)}
-            self.codes.append(np.array([idx[f] for f in p.frame_ids], dtype=np.int32))
-        if p.objects is not None:
-            if self.objects is None:
-                self.objects = [None] * self.n
-            self.objects.extend(p.objects)
-        elif self.objects is not None:
-            self.objects.extend([None] * k)
-        self.n += k
-
-    def log_result(self, master_log: np.ndarray | None) -> np.ndarray:
-        """The log-time array (a prefix view of the master's if shared throughout)."""
-        if isinstance(self.log, _SharedLogTime):
-            if self.log.col is not None:
-                return self.log.col.result()
-            return master_log[: self.n]
-        return self.log.result()
-
-    def build(self, log_t: np.ndarray) -> TopicArrays:
-        pub = log_t if self.pub.col is None else self.pub.col.result()
-        stamp = log_t if self.stamp.col is None else self.stamp.col.result()
-        fields = {k: c.result() for k, c in self.fields.items()}
-        codes = self.codes.result() if len(self.frames) > 1 else None
-        objects = self.objects
-        if not self.sorted:
-            order = np.argsort(log_t, kind="stable")
-            pub_alias, stamp_alias = pub is log_t, stamp is log_t
-            log_t = log_t[order]
-            pub = log_t if pub_alias else pub[order]
-            stamp = log_t if stamp_alias else stamp[order]
-            fields = {k: v[order] for k, v in fields.items()}
-            codes = None if codes is None else codes[order]
-            objects = None if objects is None else [objects[i] for i in order]
-        _aliases(self.ros_type, self.names, fields)
-        return TopicArrays(
-            self.topic,
-            self.ros_type,
-            stamp,
-            log_t,
-            pub,
-            fields,
-            tuple(self.frames),
-            codes,
-            tuple(self.names),
-            objects,
-            self.qos,
-        )
-
-
-def _aliases(ros_type: str, names: list[str], fields: dict[str, np.ndarray]) -> None:
-    if ros_type != "sensor_msgs/msg/JointState":
-        return
-    for nm in names:
-        for k in ("position", "effort", "velocity"):
-            if f"{nm}.{k}" in fields and nm not in fields:
-                fields[nm] = fields[f"{nm}.{k}"]
-    if names:
-        for k in ("position", "velocity", "effort"):
-            if f"{names[0]}.{k}" in fields and k not in fields:
-                fields[k] = fields[f"{names[0]}.{k}"]
 
 
 def _check_channel(f: McapFile, cid: int) -> tuple[str, str | None]:
@@ -571,7 +194,7 @@ def _file_chunks(path: Path, ctx: _Ctx) -> Iterator[list[tuple[str, list[Piece]]
             ctx.truncated.append(str(path))
 
 
-def _finish(path, ctx: _Ctx, collectors: dict[str, _Collector], strict: bool) -> RunData:
+def _finish(path, ctx: _Ctx, collectors: dict[str, Collector], strict: bool) -> RunData:
     if strict and ctx.truncated:
         raise TruncatedBagError(ctx.truncated[0], "file is truncated (strict mode)")
     if ctx.want is not None:
@@ -585,7 +208,7 @@ def _finish(path, ctx: _Ctx, collectors: dict[str, _Collector], strict: bool) ->
 
 def _add_results(
     results: list[tuple[str, list[Piece]]],
-    collectors: dict[str, _Collector],
+    collectors: dict[str, Collector],
     ctx: _Ctx,
     capacity: int | None,
 ) -> None:
@@ -600,12 +223,12 @@ def _add_results(
         if col is None:
             ros_type, qos, cap = ctx.topics[topic]
             cap = cap if capacity is None else capacity
-            col = collectors[topic] = _Collector(topic, ros_type, qos, cap, master)
+            col = collectors[topic] = Collector(topic, ros_type, qos, cap, master)
             master = master or col
         col.add(pieces)
 
 
-def _build_all(collectors: dict[str, _Collector]) -> dict[str, TopicArrays]:
+def _build_all(collectors: dict[str, Collector]) -> dict[str, TopicArrays]:
     out: dict[str, TopicArrays] = {}
     master_log = None
     for t, c in collectors.items():
@@ -645,13 +268,13 @@ def read_run(
     """
     files, warn = bag_files(path)
     ctx = _Ctx(None if topics is None else set(topics), warn=warn)
-    collectors: dict[str, _Collector] = {}
+    collectors: dict[str, Collector] = {}
     for fpath in files:
         for results in _file_chunks(fpath, ctx):
             _add_results(results, collectors, ctx, None)
         for topic, (ros_type, qos, _cap) in ctx.topics.items():
             if topic not in collectors:  # a channel without messages
-                collectors[topic] = _Collector(topic, ros_type, qos, 0)
+                collectors[topic] = Collector(topic, ros_type, qos, 0)
     data = _finish(path, ctx, collectors, strict)
     if data.message_count == 0:
         if ctx.truncated:
@@ -677,7 +300,7 @@ def iter_run(
     """
     files, warn = bag_files(path)
     ctx = _Ctx(None if topics is None else set(topics), warn=warn)
-    collectors: dict[str, _Collector] = {}
+    collectors: dict[str, Collector] = {}
     total = 0
     n_chunks = 0
     pending = None

@@ -121,9 +121,10 @@ def make_executor(kind: str) -> tuple[Any, str]:
 def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | None = None) -> int:
     """Run one node to the end (see the module docstring); returns the exit status."""
     import rclpy
-    from pneu_msgs_py.params.core import ParamError
     from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
+
+    from pneu_msgs_py.params.core import ParamError
 
     rclpy.init(args=args)
     node = executor = None

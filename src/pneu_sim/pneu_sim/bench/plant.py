@@ -14,8 +14,8 @@ __all__ = ["plant_rtf"]
 
 def plant_rtf(duration_s: float = 20.0, seed: int = 0) -> float:
     """Simulated seconds per wall-clock second over ``duration_s`` (JIT warmed first)."""
-    from pneu_sim.physics.params import load_plant
     from pneu_sim.physics.plant import Plant
+    from pneu_sim.physics.plant_file import load_plant
 
     if not (duration_s > 0.0):
         raise ValueError(f"duration_s: {duration_s!r} refused; allowed: > 0 s")

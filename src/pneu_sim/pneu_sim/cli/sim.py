@@ -169,7 +169,7 @@ def _plot(rows, path: Path, title: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pneu_sim.physics.params import load_plant
+    from pneu_sim.physics.plant_file import load_plant
 
     params = load_plant(args.plant)  # ParamError (a ValueError) -> one line via the dispatcher
     out: Path = args.out

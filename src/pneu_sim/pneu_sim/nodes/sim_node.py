@@ -15,7 +15,7 @@ import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from pneu_driver.safety.supervisor import SafetySupervisor, load_safety_params
+from pneu_driver.safety import SafetySupervisor, load_safety_params
 from pneu_msgs_py.contract.convert import (
     DiagStatus,
     command_from_msg,
@@ -55,8 +55,8 @@ from pneu_sim.nodes.sim_core import (
     load_faults,
     safety_statuses,
 )
-from pneu_sim.physics.params import load_plant
 from pneu_sim.physics.plant import Plant
+from pneu_sim.physics.plant_file import load_plant
 
 SENSOR_TOPICS = (*PRESSURE_TOPICS, JOINT_STATE_TOPIC["linear"], JOINT_STATE_TOPIC["rotary"])
 

@@ -30,7 +30,7 @@ from pneu_driver.daq.nidaqmx_backend import NidaqmxBackend
 from pneu_driver.daq.rig import RigParams
 from pneu_driver.daq.scaling import Scaler
 from pneu_driver.loop.driver_loop import DriverLoop
-from pneu_driver.safety.supervisor import SafetyParams, SafetySupervisor
+from pneu_driver.safety import SafetyParams, SafetySupervisor
 from pneu_msgs_py.params.core import with_updates
 
 HWTSP = AcquisitionType.HW_TIMED_SINGLE_POINT
@@ -415,7 +415,7 @@ def test_pre_start_write_refused_is_not_fatal(daq, caplog):
 
 
 def test_probe_exit_codes(daq, capsys):
-    from pneu_driver.daq import probe
+    from pneu_driver.cli import probe
 
     assert probe.main([]) == 0
     assert "Dev1: present" in capsys.readouterr().out
@@ -430,7 +430,7 @@ def test_probe_exit_codes(daq, capsys):
 
 def test_probe_on_this_machine_names_the_missing_device(capsys):
     """Unpatched nidaqmx: no driver here (or no such device on a rig PC): one line, exit 1."""
-    from pneu_driver.daq import probe
+    from pneu_driver.cli import probe
 
     assert probe.main(["--device", "NoSuchDev42"]) == 1
     err = capsys.readouterr().err

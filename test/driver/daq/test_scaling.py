@@ -19,7 +19,7 @@ from pneu_driver.daq.scaling import (
 from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.params.core import ParamError, from_dict
 
-CONFIG = Path(__file__).resolve().parents[2] / "config"
+CONFIG = Path(__file__).resolve().parents[3] / "config"
 
 
 def test_rig_yaml_is_the_documented_default():

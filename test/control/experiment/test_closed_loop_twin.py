@@ -10,7 +10,7 @@ from pneu_control.experiment import session
 from pneu_control.experiment.robustness import scaled_plant
 from pneu_control.experiment.runner import run
 from pneu_msgs_py.params.paths import config_file
-from pneu_sim.physics.params import load_plant
+from pneu_sim.physics.plant_file import load_plant
 
 ALGORITHMS = ("pid", "ladrc", "eso_smc")
 CORNERS = [(1.0, 1.0), (0.7, 1.0), (1.3, 1.0), (1.0, 0.7), (1.0, 1.3)]

@@ -6,5 +6,5 @@ from pneu_msgs_py.contract.topics import markdown_table
 
 
 def test_readme_topic_table_matches_contract():
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[3] / "README.md").read_text()
     assert markdown_table() in readme

@@ -7,8 +7,9 @@ import pytest
 import yaml
 from pneu_msgs_py.params.core import ParamError, with_updates
 from pneu_msgs_py.params.paths import config_file
-from pneu_sim.physics.params import PlantParams, load_plant, params_from_tree
+from pneu_sim.physics.params import PlantParams
 from pneu_sim.physics.plant import Plant
+from pneu_sim.physics.plant_file import load_plant, params_from_tree
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ from pneu_control.cli.main import main
 from pneu_control.experiment import session
 from pneu_control.experiment.replay import replay
 from pneu_msgs_py.bag.reader import read_run
-from pneu_sim.physics.params import load_plant
+from pneu_sim.physics.plant_file import load_plant
 
 
 @pytest.fixture(scope="module")

@@ -12,8 +12,8 @@ from pneu_control.controller.params import load_controller_params
 from pneu_msgs_py.contract.units import MM_PER_M
 from pneu_msgs_py.params.core import ParamError, with_updates
 from pneu_msgs_py.params.paths import config_file
-from pneu_sim.physics.params import load_plant
 from pneu_sim.physics.plant import Plant
+from pneu_sim.physics.plant_file import load_plant
 
 RETUNED = config_file("controllers_retuned.yaml")
 DEFAULTS = config_file("controllers.yaml")

@@ -15,8 +15,8 @@ from pneu_control.experiment.runner import run
 from pneu_msgs_py.contract.samples import NEUTRAL_V
 from pneu_msgs_py.params.core import with_updates
 from pneu_msgs_py.params.paths import config_file
-from pneu_sim.physics.params import load_plant
 from pneu_sim.physics.plant import Plant
+from pneu_sim.physics.plant_file import load_plant
 
 RETUNED = config_file("controllers_retuned.yaml")
 DEFAULTS = config_file("controllers.yaml")

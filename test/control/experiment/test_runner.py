@@ -7,7 +7,7 @@ import pytest
 from pneu_control.analysis.run_analysis import analyze
 from pneu_control.experiment import session
 from pneu_control.experiment.runner import RunSpec, run
-from pneu_sim.physics.params import load_plant
+from pneu_sim.physics.plant_file import load_plant
 
 
 @pytest.fixture(scope="module")

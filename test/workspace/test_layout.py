@@ -176,15 +176,75 @@ def test_exec_depends_cover_every_import(pkg):
     assert not missing, f"{pkg}: dependencies not declared:\n  " + "\n  ".join(missing)
 
 
+def _role(pkg: str, f: Path) -> str:
+    """The sub-package (role folder) a module of ``pkg`` lives in."""
+    parts = f.relative_to(SRC / pkg / pkg).parts
+    return parts[0] if len(parts) > 1 else ""
+
+
+# role folders per package: the tree reads like the architecture (ARCHITECTURE.md)
+ROLES = {
+    "pneu_msgs_py": {"contract", "params", "bag", "nodes", "bench"},
+    "pneu_sim": {"physics", "cycle", "faults", "nodes", "cli", "bench"},
+    "pneu_control": {
+        "algorithms",
+        "observers",
+        "controller",
+        "experiment",
+        "analysis",
+        "nodes",
+        "cli",
+        "bench",
+    },
+    "pneu_driver": {"daq", "loop", "safety", "nodes", "cli", "bench"},
+}
+LAUNCH_ONLY = {"launch", "launch_ros", "ament_index_python"}
+
+
 @pytest.mark.parametrize("pkg", PACKAGES)
-def test_rclpy_only_in_node_modules(pkg):
-    """ROS-free cores: ROS imports at module top level only in ``*_node.py`` shells."""
+def test_every_module_lives_in_a_role_folder(pkg):
+    loose = [f.name for f in (SRC / pkg / pkg).glob("*.py") if f.name != "__init__.py"]
+    assert not loose, f"{pkg}: modules outside a role folder: {loose}"
+    folders = {d.name for d in (SRC / pkg / pkg).iterdir() if (d / "__init__.py").is_file()}
+    assert folders == ROLES[pkg]
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_rclpy_only_under_nodes(pkg):
+    """ROS-free cores: ROS (and launch) imports at module top level only in ``nodes/``."""
     bad = []
     for f in sorted((SRC / pkg / pkg).rglob("*.py")):
         _, top = _imports(f)
-        if top & ROS_ONLY and not f.name.endswith("_node.py"):
-            bad.append(f"{f.relative_to(SRC)}: {sorted(top & ROS_ONLY)}")
-    assert not bad, f"ROS imported at top level outside a node shell: {bad}"
+        if top & (ROS_ONLY | LAUNCH_ONLY) and _role(pkg, f) != "nodes":
+            bad.append(f"{f.relative_to(SRC)}: {sorted(top & (ROS_ONLY | LAUNCH_ONLY))}")
+    assert not bad, f"ROS imported at top level outside nodes/: {bad}"
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_nidaqmx_only_in_the_daq_backend(pkg):
+    bad = [
+        str(f.relative_to(SRC))
+        for f in sorted((SRC / pkg / pkg).rglob("*.py"))
+        if "nidaqmx" in _imports(f)[0]
+        and f.relative_to(SRC / pkg / pkg).as_posix() != "daq/nidaqmx_backend.py"
+    ]
+    assert not bad, f"nidaqmx imported outside pneu_driver/daq/nidaqmx_backend.py: {bad}"
+
+
+@pytest.mark.parametrize("pkg", PACKAGES)
+def test_argparse_only_in_cli_and_benchmarks_only_in_bench(pkg):
+    """Command-line parsing lives in cli/; timing loops (perf_counter) in bench/ (and the
+    runner's own wall-time figure, the driver loop's clock and the node shells)."""
+    clock_ok = {"bench", "cli", "nodes", "loop", "experiment"}
+    bad = []
+    for f in sorted((SRC / pkg / pkg).rglob("*.py")):
+        role = _role(pkg, f)
+        every, _ = _imports(f)
+        if "argparse" in every and role not in ("cli", "bench"):
+            bad.append(f"{f.relative_to(SRC)}: argparse")
+        if "perf_counter(" in f.read_text(encoding="utf-8") and role not in clock_ok:
+            bad.append(f"{f.relative_to(SRC)}: perf_counter")
+    assert not bad, bad
 
 
 @pytest.mark.parametrize("pkg", PACKAGES)

@@ -5,7 +5,7 @@ import math
 from pathlib import Path
 
 import pytest
-from pneu_driver.safety.supervisor import (
+from pneu_driver.safety import (
     ERROR,
     OK,
     WARN,
@@ -16,7 +16,7 @@ from pneu_driver.safety.supervisor import (
 from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.params.core import ParamError, from_dict
 
-CONFIG = Path(__file__).resolve().parents[2] / "config"
+CONFIG = Path(__file__).resolve().parents[3] / "config"
 T_NS = 1_000_000
 LIVE_VOLTS = (2.0, 1.5, 3.0, 2.5)
 

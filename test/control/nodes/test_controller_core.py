@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from pneu_control.bench.shell import bench_shell_us_per_sample
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
 from pneu_control.controller.params import load_controller_params
 from pneu_control.nodes.controller_core import (
@@ -12,7 +13,6 @@ from pneu_control.nodes.controller_core import (
     ControllerShellCore,
     SampleAssembler,
     _new,
-    bench_shell_us_per_sample,
     new_sensor_messages,
 )
 from pneu_msgs_py.contract.convert import (

@@ -15,7 +15,7 @@ from pneu_control.controller.params import (
 from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.params.core import describe, with_updates
 
-CONFIG = Path(__file__).resolve().parents[2] / "config" / "controllers.yaml"
+CONFIG = Path(__file__).resolve().parents[3] / "config" / "controllers.yaml"
 
 # DESIGN §8 (paper, Results section)
 PAPER = {

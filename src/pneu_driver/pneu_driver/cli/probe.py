@@ -1,4 +1,4 @@
-"""``python -m pneu_driver.daq.probe``: is the rig's DAQ device there? (no ROS, no task created)
+"""``python -m pneu_driver.cli.probe``: is the rig's DAQ device there? (no ROS, no task created)
 
 Prints the device and the devices visible and exits 0 when the configured
 device is present; otherwise one line on stderr naming the device and listing
@@ -21,7 +21,7 @@ __all__ = ["main"]
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m pneu_driver.daq.probe", description=__doc__.splitlines()[0]
+        prog="python -m pneu_driver.cli.probe", description=__doc__.splitlines()[0]
     )
     parser.add_argument("--rig", help="rig.yaml (default: the project's config/rig.yaml)")
     parser.add_argument("--device", help="device name, overriding rig.yaml")

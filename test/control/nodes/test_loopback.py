@@ -12,7 +12,7 @@ import pytest
 from pneu_control.experiment import session
 from pneu_control.experiment.runner import run
 from pneu_control.nodes.loopback import run_loopback
-from pneu_driver.safety.supervisor import SafetyParams, SafetySupervisor
+from pneu_driver.safety import SafetyParams, SafetySupervisor
 
 
 def _assert_identical(a, b, states=True):

@@ -10,7 +10,7 @@ from pneu_driver.daq.errors import DriverError, LateCycleError
 from pneu_driver.daq.rig import RigParams
 from pneu_driver.daq.scaling import RawSample
 from pneu_driver.loop.driver_loop import CommandSlot, DriverLoop, LoopStats
-from pneu_driver.safety.supervisor import SafetyParams, SafetySupervisor
+from pneu_driver.safety import SafetyParams, SafetySupervisor
 from pneu_msgs_py.params.core import with_updates
 
 T = 1_000_000

@@ -220,8 +220,8 @@ def test_sim_node_params_validate():
 
 def test_injected_faults_act_where_the_runner_applies_them():
     from pneu_sim.faults.injection import parse_faults
-    from pneu_sim.physics.params import load_plant
     from pneu_sim.physics.plant import Plant
+    from pneu_sim.physics.plant_file import load_plant
 
     faults = parse_faults(
         [

@@ -14,8 +14,8 @@ from pneu_sim.faults.injection import (
     SensorScaling,
     parse_fault,
 )
-from pneu_sim.physics.params import load_plant
 from pneu_sim.physics.plant import Plant
+from pneu_sim.physics.plant_file import load_plant
 
 
 def test_parse_defaults_and_params():

@@ -1,0 +1,252 @@
+"""Thresholds of every safety rule (``config/safety.yaml``), validated once."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pneu_msgs_py.params.core import ParamError, from_dict, param, with_updates
+
+__all__ = ["SafetyParams", "load_safety_params"]
+
+
+@dataclass(frozen=True)
+class SafetyParams:
+    """Thresholds of every rule (``config/safety.yaml``); defaults are the safe ones.
+
+    Values that would silently disable a protection (negative margins, a
+    watchdog longer than 1 s, a speed limit above the rated speed) are refused
+    unless ``allow_unsafe`` is true; :meth:`unsafe_overrides` lists them so a
+    run can record them in its bag metadata.
+    """
+
+    allow_unsafe: bool = param(
+        False, desc="accept parameters that weaken a protection (reported in the bag metadata)"
+    )
+    # command watchdog
+    watchdog_ms: float = param(
+        5.0,
+        unit="ms",
+        lo=0.0,
+        lo_open=True,
+        hi=60000.0,
+        desc="no fresh command for this long → that valve safe (latched)",
+    )
+    # stroke soft limits (linear axis)
+    stroke_m: float = param(
+        0.150,
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+        hi=2.0,
+        desc="cylinder stroke; x = 0 at mid-stroke",
+        source="Festo DSBC-32-150",
+    )
+    stroke_margin_m: float = param(
+        0.010, unit="m", lo=-0.5, hi=0.5, desc="soft limit this far inside each end stop"
+    )
+    stroke_hyst_m: float = param(
+        0.001,
+        unit="m",
+        lo=0.0,
+        hi=0.05,
+        desc="leave the soft-limit zone only this far back inside it",
+    )
+    max_decel_m_s2: float = param(
+        20.0,
+        unit="m/s^2",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0e4,
+        desc="braking deceleration assumed for the braking distance v²/(2a)",
+    )
+    velocity_window_ms: float = param(
+        10.0,
+        unit="ms",
+        lo=0.0,
+        lo_open=True,
+        hi=1000.0,
+        desc="piston velocity from the position difference over this window",
+    )
+    extend_above_neutral: bool = param(
+        True, desc="valve #1 above 5 V drives the piston toward +x (extending)"
+    )
+    position_margin_m: float = param(
+        0.005,
+        unit="m",
+        lo=-0.5,
+        hi=0.5,
+        desc="x beyond an end stop by more than this is implausible",
+    )
+    # rotary axis
+    max_speed_rpm: float = param(
+        1500.0,
+        unit="rpm",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0e5,
+        desc="motor speed above this → rotary valve safe (latched)",
+    )
+    rated_speed_rpm: float = param(
+        6000.0,
+        unit="rpm",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0e5,
+        desc="rating: min(Gast 1AM free speed ≈ 10 000 rpm, encoder 100 kHz / 1000 P/R = 6000 rpm)",
+        source="Gast 1AM catalogue (UNV); Omron E6B2-CWZ6C datasheet",
+    )
+    speed_window_ms: float = param(
+        10.0,
+        unit="ms",
+        lo=0.0,
+        lo_open=True,
+        hi=1000.0,
+        desc="speed for the overspeed rule from counts over this window",
+    )
+    counts_per_rev: int = param(
+        4000,
+        unit="counts/rev",
+        lo=1,
+        hi=10_000_000,
+        desc="encoder counts per revolution (rig.yaml encoder.ppr × decoding)",
+    )
+    max_accel_rad_s2: float = param(
+        5.0e4,
+        unit="rad/s^2",
+        lo=0.0,
+        hi=1.0e7,
+        desc="a count step deviating from the previous speed by more than this acceleration allows is a jump",
+    )
+    encoder_slack_counts: int = param(
+        2, unit="counts", lo=0, hi=1000, desc="quantisation allowance added to the jump bound"
+    )
+    # pressures (absolute)
+    supply_linear_pa: float = param(
+        301325.0,
+        unit="Pa",
+        lo=1.0e5,
+        hi=2.0e6,
+        desc="valve #1 supply, absolute (paper 0.2 MPa read as gauge)",
+    )
+    supply_rotary_pa: float = param(
+        501325.0,
+        unit="Pa",
+        lo=1.0e5,
+        hi=2.0e6,
+        desc="valve #2 supply, absolute (paper 0.4 MPa read as gauge)",
+    )
+    pressure_margin_pa: float = param(
+        5.0e4,
+        unit="Pa",
+        lo=-1.0e6,
+        hi=1.0e6,
+        desc="a pressure above supply + margin is implausible",
+    )
+    # dead encoder or blocked rotor
+    stall_inlet_pa: float = param(
+        2.51325e5,
+        unit="Pa",
+        lo=1.0e5,
+        hi=2.0e6,
+        desc="motor inlet pressure (absolute) above which the rotor must turn: 1.5 bar gauge, "
+        "over 2x the Coulomb level M_c/K = 0.128 N*m / 1.87e-6 m^3 = 68 kPa (paper Table 1, twin)",
+    )
+    stall_ms: float = param(
+        20.0,
+        unit="ms",
+        lo=0.0,
+        lo_open=True,
+        hi=1000.0,
+        desc="no encoder count for this long while the inlet is above stall_inlet_pa (a count "
+        "comes every 1.5 ms even at 10 rpm): "
+        "dead encoder or blocked rotor -> rotary safe",
+    )
+    # frozen values and live voltage ranges
+    stuck_ms: float = param(
+        250.0,
+        unit="ms",
+        lo=0.0,
+        lo_open=True,
+        hi=60000.0,
+        desc="an analog value bit-identical for longer than this is frozen",
+    )
+    pressure_live_v: tuple[float, float] = param(
+        (-0.3, 10.3), unit="V", desc="Huba 511 output outside this is a broken wire / dead sensor"
+    )
+    laser_live_v: tuple[float, float] = param(
+        (-0.3, 5.3), unit="V", desc="HG-C1200 output outside this is a lost beam / broken wire"
+    )
+
+    def _check(self) -> None:
+        for name in ("pressure_live_v", "laser_live_v"):
+            rng = getattr(self, name)
+            if len(rng) != 2 or not rng[0] < rng[1]:
+                raise ParamError(name, list(rng), "[lo, hi] volts with lo < hi")
+        if self.stroke_margin_m >= self.stroke_m / 2:
+            raise ParamError(
+                "stroke_margin_m",
+                self.stroke_margin_m,
+                f"less than half the stroke ({self.stroke_m / 2:g} m)",
+            )
+        if self.allow_unsafe:
+            return
+        if self.stroke_margin_m < 0.0:
+            raise ParamError(
+                "stroke_margin_m", self.stroke_margin_m, "≥ 0 m (or set allow_unsafe: true)"
+            )
+        if self.position_margin_m < 0.0:
+            raise ParamError(
+                "position_margin_m", self.position_margin_m, "≥ 0 m (or set allow_unsafe: true)"
+            )
+        if self.pressure_margin_pa < 0.0:
+            raise ParamError(
+                "pressure_margin_pa", self.pressure_margin_pa, "≥ 0 Pa (or set allow_unsafe: true)"
+            )
+        if self.watchdog_ms > 1000.0:
+            raise ParamError(
+                "watchdog_ms", self.watchdog_ms, "(0, 1000] ms (or set allow_unsafe: true)"
+            )
+        if self.max_speed_rpm > self.rated_speed_rpm:
+            raise ParamError(
+                "max_speed_rpm",
+                self.max_speed_rpm,
+                f"(0, {self.rated_speed_rpm:g}] rpm = rated_speed_rpm (or set allow_unsafe: true)",
+            )
+
+    def unsafe_overrides(self) -> tuple[str, ...]:
+        """Which protections these values weaken (empty when all are within the safe bounds)."""
+        out = []
+        if self.stroke_margin_m < 0.0:
+            out.append(
+                f"stroke_margin_m={self.stroke_margin_m:g} m < 0: soft limit beyond the end stops"
+            )
+        if self.position_margin_m < 0.0:
+            out.append(f"position_margin_m={self.position_margin_m:g} m < 0")
+        if self.pressure_margin_pa < 0.0:
+            out.append(f"pressure_margin_pa={self.pressure_margin_pa:g} Pa < 0")
+        if self.watchdog_ms > 1000.0:
+            out.append(f"watchdog_ms={self.watchdog_ms:g} ms > 1000 ms")
+        if self.max_speed_rpm > self.rated_speed_rpm:
+            out.append(
+                f"max_speed_rpm={self.max_speed_rpm:g} > rated_speed_rpm={self.rated_speed_rpm:g}"
+            )
+        return tuple(out)
+
+
+def load_safety_params(
+    path: str | Path | None = None, overrides: dict[str, Any] | None = None
+) -> SafetyParams:
+    """Read ``safety.yaml`` (default: the project's ``config/safety.yaml``); missing keys take defaults."""
+    if path is None:
+        from pneu_msgs_py.params.paths import config_file
+
+        path = config_file("safety.yaml")
+    with open(path, encoding="utf-8") as fh:
+        data = yaml.safe_load(fh) or {}
+    params = from_dict(SafetyParams, data, strict=False)
+    if overrides:
+        params = with_updates(params, overrides)
+    return params

@@ -1,0 +1,244 @@
+"""The MCAP container of a bag: records, chunks, indexes, summary and footer (ROS 2 profile).
+
+:class:`McapContainer` owns the file. It registers schemas and channels
+(channel metadata ``offered_qos_profiles`` and ``topic_type_hash`` as
+rosbag2 Jazzy writes them), writes metadata records at once, writes each
+chunk of :class:`~pneu_msgs_py.bag.chunks.Batch` es compressed, with its
+message indexes, and flushes it to the OS (a hard kill loses at most the
+chunk being buffered), and at :meth:`~McapContainer.finish` writes the
+summary (schemas, channels, statistics, chunk and metadata indexes, summary
+offsets) and the footer.
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Mapping
+from pathlib import Path
+
+from pneu_msgs_py.bag import mcap_records as R
+from pneu_msgs_py.bag.chunks import Batch, Channel, interleave
+from pneu_msgs_py.bag.errors import BagWriteError
+from pneu_msgs_py.bag.schemas import (
+    MESSAGE_ENCODING,
+    MSG_DEFINITIONS,
+    PROFILE,
+    SCHEMA_ENCODING,
+    TYPE_HASHES,
+)
+from pneu_msgs_py.contract.qos import offered_qos_yaml
+from pneu_msgs_py.contract.topics import qos_for
+
+__all__ = ["COMPRESSIONS", "McapContainer"]
+
+COMPRESSIONS = ("zstd", "lz4", "none")
+
+
+class McapContainer:
+    """One MCAP file being written (see the module docstring). ``qos_mode``: which
+    publisher QoS (:func:`pneu_msgs_py.contract.topics.qos_for`) the channels record."""
+
+    def __init__(self, path: Path, library: str, compression: str, qos_mode: str) -> None:
+        self.path = path
+        self.qos_mode = qos_mode
+        if compression == "zstd":
+            import zstandard
+
+            self._compress = zstandard.ZstdCompressor(level=1).compress
+        elif compression == "lz4":
+            import lz4.frame
+
+            self._compress = lz4.frame.compress
+        else:
+            self._compress = None
+        self._comp_name = "" if compression == "none" else compression
+        try:
+            self._f = open(self.path, "wb")
+        except OSError as e:
+            raise BagWriteError(self.path, f"cannot open for writing: {e.strerror}") from None
+        self._pos = 0
+        self._crc = 0
+        self.schemas: dict[str, tuple[int, bytes]] = {}
+        self.channels: dict[str, Channel] = {}
+        self._chunk_indexes: list[bytes] = []
+        self._metadata_indexes: list[bytes] = []
+        self._n_metadata = 0
+        self.t_start: int | None = None
+        self.t_end: int | None = None
+        self._write(R.MAGIC + R.header(PROFILE, library))
+
+    def _write(self, data: bytes) -> None:
+        self._f.write(data)
+        self._crc = zlib.crc32(data, self._crc)
+        self._pos += len(data)
+
+    def channel(self, topic: str, ros_type: str) -> Channel:
+        ch = self.channels.get(topic)
+        if ch is not None:
+            if ch.ros_type != ros_type:
+                raise BagWriteError(
+                    self.path, f"topic {topic} already has type {ch.ros_type}, not {ros_type}"
+                )
+            return ch
+        if ros_type not in self.schemas:
+            sid = len(self.schemas) + 1
+            text = MSG_DEFINITIONS.get(ros_type)
+            if text is None:
+                text = ""  # foreign type via write_serialized: definition unknown here
+            self.schemas[ros_type] = (
+                sid,
+                R.schema(sid, ros_type, SCHEMA_ENCODING, text.encode("utf-8")),
+            )
+        sid = self.schemas[ros_type][0]
+        cid = len(self.channels) + 1
+        qos = qos_for(topic, self.qos_mode)
+        ch = Channel(cid, topic, ros_type, sid, qos)
+        # the two channel metadata keys rosbag2 (Jazzy) writes
+        meta = {
+            "offered_qos_profiles": offered_qos_yaml([qos]),
+            "topic_type_hash": TYPE_HASHES.get(ros_type, ""),
+        }
+        ch.record = R.channel(cid, sid, topic, MESSAGE_ENCODING, meta)
+        self.channels[topic] = ch
+        return ch
+
+    def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """An MCAP metadata record (all keys and values str), written immediately."""
+        if not isinstance(name, str) or not name:
+            raise BagWriteError(self.path, f"metadata name {name!r}: need a non-empty str")
+        for k, v in data.items():
+            if not isinstance(k, str) or not isinstance(v, str):
+                raise BagWriteError(
+                    self.path, f"metadata {name}[{k!r}]: keys and values must be str, got {v!r}"
+                )
+        rec = R.metadata(name, dict(data))
+        self._metadata_indexes.append(R.metadata_index(self._pos, len(rec), name))
+        self._n_metadata += 1
+        self._write(rec)
+        self._f.flush()
+
+    def write_chunk(self, batches: list[Batch]) -> None:
+        """One chunk of ``batches`` with its message indexes and chunk index; flushed to the OS."""
+        for b in batches:
+            if len(b.log_times) and int(b.log_times.min()) < 0:
+                raise BagWriteError(
+                    self.path, f"{b.channel.topic}: negative time {int(b.log_times.min())} ns"
+                )
+        data, offsets = interleave(batches)
+        # schema / channel records of channels first used in this chunk
+        head = []
+        for b in batches:
+            ch = b.channel
+            if not ch.emitted:
+                sid, srec = self.schemas[ch.ros_type]
+                if srec:
+                    head.append(srec)
+                    self.schemas[ch.ros_type] = (sid, b"")  # emitted
+                head.append(ch.record)
+                ch.emitted = True
+        if head:
+            self._write(b"".join(head))
+        t_min = int(min(b.log_times.min() for b in batches))
+        t_max = int(max(b.log_times.max() for b in batches))
+        self.t_start = t_min if self.t_start is None else min(self.t_start, t_min)
+        self.t_end = t_max if self.t_end is None else max(self.t_end, t_max)
+        raw = memoryview(data)
+        crc = zlib.crc32(raw)
+        comp = self._compress(raw) if self._compress else bytes(raw)
+        chunk_start = self._pos
+        crec = R.chunk(t_min, t_max, len(raw), crc, self._comp_name, comp)
+        self._write(crec)
+        mi_start = self._pos
+        mi_offsets: dict[int, int] = {}
+        mi = []
+        pos = self._pos
+        for b in sorted(batches, key=lambda b: b.channel.id):
+            rec = R.message_index(b.channel.id, b.log_times, offsets[id(b)])
+            mi_offsets[b.channel.id] = pos
+            pos += len(rec)
+            mi.append(rec)
+        self._write(b"".join(mi))
+        self._f.flush()
+        self._chunk_indexes.append(
+            R.chunk_index(
+                t_min,
+                t_max,
+                chunk_start,
+                len(crec),
+                mi_offsets,
+                self._pos - mi_start,
+                self._comp_name,
+                len(comp),
+                len(raw),
+            )
+        )
+
+    def finish(self, rosbag2_yaml: str) -> None:
+        """The ``rosbag2`` metadata record, data end, summary and footer; then close the file."""
+        # channels that never got a message still need their records for the summary
+        for ch in self.channels.values():
+            if not ch.emitted:
+                sid, srec = self.schemas[ch.ros_type]
+                if srec:
+                    self._write(srec)
+                    self.schemas[ch.ros_type] = (sid, b"")
+                self._write(ch.record)
+                ch.emitted = True
+        rec = R.metadata("rosbag2", {"serialized_metadata": rosbag2_yaml})
+        self._metadata_indexes.append(R.metadata_index(self._pos, len(rec), "rosbag2"))
+        self._n_metadata += 1
+        self._write(rec)
+        self._write(R.data_end(self._crc))
+        summary_start = self._pos
+        summary_crc = 0
+        groups: list[tuple[int, int, int]] = []
+
+        def group(op: int, recs: list[bytes]) -> None:
+            nonlocal summary_crc
+            if not recs:
+                return
+            blob = b"".join(recs)
+            groups.append((op, self._pos, len(blob)))
+            self._f.write(blob)
+            summary_crc = zlib.crc32(blob, summary_crc)
+            self._pos += len(blob)
+
+        schema_recs = []
+        for ros_type, (sid, _) in sorted(self.schemas.items(), key=lambda kv: kv[1][0]):
+            text = MSG_DEFINITIONS.get(ros_type, "")
+            schema_recs.append(R.schema(sid, ros_type, SCHEMA_ENCODING, text.encode("utf-8")))
+        group(R.Op.SCHEMA, schema_recs)
+        group(R.Op.CHANNEL, [ch.record for ch in self.channels.values()])
+        n_msgs = sum(ch.count for ch in self.channels.values())
+        group(
+            R.Op.STATISTICS,
+            [
+                R.statistics(
+                    n_msgs,
+                    len(self.schemas),
+                    len(self.channels),
+                    self._n_metadata,
+                    len(self._chunk_indexes),
+                    self.t_start or 0,
+                    self.t_end or 0,
+                    {ch.id: ch.count for ch in self.channels.values()},
+                )
+            ],
+        )
+        group(R.Op.CHUNK_INDEX, self._chunk_indexes)
+        group(R.Op.METADATA_INDEX, self._metadata_indexes)
+        summary_offset_start = self._pos
+        so = b"".join(R.summary_offset(op, start, length) for op, start, length in groups)
+        self._f.write(so)
+        summary_crc = zlib.crc32(so, summary_crc)
+        self._pos += len(so)
+        if not groups:
+            summary_start = 0
+            summary_offset_start = 0
+        foot = R.footer_prefix(summary_start, summary_offset_start)
+        summary_crc = zlib.crc32(foot, summary_crc)
+        self._f.write(foot + summary_crc.to_bytes(4, "little") + R.MAGIC)
+        self._f.flush()
+
+    def close(self) -> None:
+        self._f.close()
