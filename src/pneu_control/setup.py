@@ -38,6 +38,7 @@ setup(
             "linear_controller = pneu_control.nodes.controller_node:main_linear",
             "rotary_controller = pneu_control.nodes.controller_node:main_rotary",
             "logger = pneu_control.nodes.logger_node:main",
+            "controller_manager = pneu_control.nodes.controller_manager:main",
         ],
     },
 )

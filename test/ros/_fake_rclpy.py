@@ -28,6 +28,7 @@ import contextlib
 import copy
 import enum
 import inspect
+import struct
 import sys
 import time
 import types
@@ -54,6 +55,8 @@ class World:
             from rosbags.typesys import Stores, get_typestore
 
             self._ts = get_typestore(Stores.ROS2_JAZZY)
+        if msg is None:
+            return b""
         ts = self._ts
 
         def conv(m, tname):
@@ -261,13 +264,19 @@ class _Publisher:
         WORLD.pubs[topic].append(self)
 
     def publish(self, msg):
-        if not isinstance(msg, self.msg_type):
-            raise TypeError(f"Expected {self.msg_type}, got {type(msg)}")
-        data = WORLD.cdr(msg)
+        if isinstance(msg, bytes):  # rclpy: pre-serialised CDR goes out as it is (publish_raw)
+            data = msg
+            msg = None
+        elif not isinstance(msg, self.msg_type):
+            raise TypeError(f"Expected {self.msg_type} or bytes, got {type(msg)}")
+        else:
+            data = WORLD.cdr(msg)
         if self.topic == "/clock":
-            WORLD.sim_time_ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+            sec, nsec = struct.unpack_from("<iI", data, 4)
+            WORLD.sim_time_ns = sec * 1_000_000_000 + nsec
         for sub in list(WORLD.subs[self.topic]):
-            WORLD.queue.append((sub.deliver, (copy.deepcopy(msg), data)))
+            m = copy.deepcopy(msg) if msg is not None else None
+            WORLD.queue.append((sub.deliver, (m, data)))
 
     def get_subscription_count(self):
         return len(WORLD.subs[self.topic])
@@ -288,6 +297,9 @@ class _Subscription:
         return len(WORLD.pubs[self.topic])
 
     def deliver(self, msg, data):
+        if not self.raw and msg is None:  # bytes published, a deserialising subscriber
+            WORLD.cdr(None) if WORLD._ts is None else None
+            msg = WORLD._ts.deserialize_cdr(data, self.msg_type._type)
         m = data if self.raw else msg
         if self.with_info:
             now = time.time_ns()

@@ -47,7 +47,8 @@ def _params_file(tmp_path, out):
                 "duration_s": DURATION_S,
                 "seed": SEED,
                 "safety": True,  # the supervisor of config/safety.yaml, as the runner has it
-                "lockstep": {"min_subscribers": 2, "timeout_s": 10.0},
+                "lockstep": {"timeout_s": 10.0},
+                "startup": {"min_subscribers": 1},
             }
         },
         "linear_controller": {

@@ -48,14 +48,13 @@ def graph(ros):
 
 
 def _feed_one_sample(ctrl, k=0):
-    from pneu_control.nodes.controller_core import SENSOR_TOPICS
-    from pneu_sim.nodes.sim_core import fill_sample_messages
-    from sensor_msgs.msg import FluidPressure, JointState
+    """The node's raw sensor callback with the payloads the sim node publishes."""
+    from pneu_msgs_py.contract.wire import SensorWire
 
-    msgs = {t: (FluidPressure() if "pressure" in t else JointState()) for t in SENSOR_TOPICS}
-    fill_sample_messages(msgs, SensorSample(k, k * 1_000_000, 2e5, 2e5, 1.5e5, 0.0, 0.0, 0.0, 0))
-    for t, m in msgs.items():
-        ctrl._on_sensor(t, m)
+    s = SensorSample(k, k * 1_000_000, 2e5, 2e5, 1.5e5, 0.0, 0.0, 0.0, 0)
+    for t, data in SensorWire().encode(s):
+        if t in ctrl.core.topics:
+            ctrl._on_sensor(t, data)
 
 
 def test_set_integer_value_on_double_parameter_takes_effect_at_next_sample(graph):

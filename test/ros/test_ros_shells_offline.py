@@ -61,8 +61,8 @@ def test_lockstep_graph_through_the_node_modules_equals_the_runner(world, tmp_pa
                 "duration_s": DURATION_S,
                 "seed": 2,
                 "safety": True,  # config/safety.yaml, as the runner
-                "lockstep.min_subscribers": 2,
-                "lockstep.settle_s": 0.0,  # the stand-in matches connections at once
+                "startup.min_subscribers": 1,
+                "startup.settle_s": 0.0,  # the stand-in matches connections at once
                 "faults": FAULT,
             },
             "/linear_controller": {
@@ -123,27 +123,25 @@ def test_lockstep_graph_through_the_node_modules_equals_the_runner(world, tmp_pa
 
 
 def test_controller_parameters_live(world):
-    from pneu_control.nodes.controller_core import SENSOR_TOPICS
     from pneu_control.nodes.controller_node import ControllerNode
     from pneu_msgs_py.contract.samples import SensorSample
-    from pneu_sim.nodes.sim_core import fill_sample_messages
+    from pneu_msgs_py.contract.wire import CommandWire, SensorWire
     from rclpy.parameter import Parameter
-    from sensor_msgs.msg import FluidPressure, JointState
 
     ctrl = ControllerNode("linear")
-    # what the node publishes: intercept the command publisher
+    # what the node publishes: intercept the command publisher (raw CDR bytes)
     sent = []
-    ctrl.cmd_pub.publish = lambda m: sent.append(
-        (m.header.stamp.sec, m.header.stamp.nanosec, list(m.effort))
+    cw = CommandWire("linear")
+    ctrl.cmd_pub.publish = lambda data: sent.append(
+        (*divmod(cw.decode(data)[0], 1_000_000_000), [cw.decode(data)[1]])
     )
+    wire = SensorWire()
 
     def feed(k):
-        msgs = {t: FluidPressure() if "pressure" in t else JointState() for t in SENSOR_TOPICS}
-        fill_sample_messages(
-            msgs, SensorSample(k, k * 1_000_000, 2e5, 2e5, 1.5e5, 1e-4 * k, 0.0, 0.0, 0)
-        )
-        for t in SENSOR_TOPICS:
-            ctrl._on_sensor(t, msgs[t])
+        s = SensorSample(k, k * 1_000_000, 2e5, 2e5, 1.5e5, 1e-4 * k, 0.0, 0.0, 0)
+        for t, data in wire.encode(s):
+            if t in ctrl.core.topics:
+                ctrl._on_sensor(t, data)
 
     feed(0)
     assert len(sent) == 1 and sent[0][:2] == (0, 0)  # stamped with the sample it answers
@@ -272,8 +270,8 @@ def test_sim_open_loop_lockstep_runs_to_its_duration(world):
         "mode": "lockstep",
         "axes": "none",
         "duration_s": 0.2,
-        "lockstep.min_subscribers": 0,
-        "lockstep.settle_s": 0.0,
+        "startup.min_subscribers": 0,
+        "startup.settle_s": 0.0,
     }
     from pneu_sim.nodes.sim_node import SimNode
     from rclpy.executors import SingleThreadedExecutor
@@ -293,8 +291,8 @@ def test_run_node_spins_to_the_end_and_leaves_the_rig_safe(world, capsys, monkey
         "mode": "lockstep",
         "axes": "none",
         "duration_s": 0.05,
-        "lockstep.min_subscribers": 0,
-        "lockstep.settle_s": 0.0,
+        "startup.min_subscribers": 0,
+        "startup.settle_s": 0.0,
     }
     import pneu_sim.nodes.sim_node as sn
 

@@ -334,6 +334,7 @@ def _fake_launch_modules() -> dict[str, types.ModuleType]:
         DeclareLaunchArgument=type("DeclareLaunchArgument", (_Action,), {}),
         OpaqueFunction=type("OpaqueFunction", (_Action,), {}),
         Shutdown=type("Shutdown", (_Action,), {}),
+        ExecuteProcess=type("ExecuteProcess", (_Action,), {}),
     )
     mod("launch.substitutions", LaunchConfiguration=_Config)
     mod("launch_ros")
@@ -393,87 +394,168 @@ def _node_param_types(package: str, executable: str) -> dict[str, type]:
     from pneu_msgs_py.params.core import describe
     from pneu_sim.nodes.sim_core import SimNodeParams
 
-    base = {"use_sim_time": bool}
+    base = {"use_sim_time": bool, "executor": str}  # executor: declared by run_node, every node
     if (package, executable) == ("pneu_sim", "sim_node"):
         return base | {s.name: s.type for s in describe(SimNodeParams)}
     if package == "pneu_control" and executable.endswith("_controller"):
         own = dict.fromkeys(_declared_params("pneu_control", "controller_node"), str)
+        own["state_rate_hz"] = float
         return base | own | {s.name: s.type for s in describe(AxisControllerParams)}
+    if (package, executable) == ("pneu_control", "controller_manager"):
+        return base | dict.fromkeys(_declared_params(package, executable), str)
     module = {"logger": "logger_node", "driver_node": "driver_node"}[executable]
     return base | dict.fromkeys(_declared_params(package, module), str)
 
 
+def _check_values(where: str, declared: dict[str, type], values: dict) -> None:
+    for key, value in values.items():
+        assert key in declared, f"{where} declares no parameter {key}"
+        want = declared[key]
+        if want is float:
+            assert isinstance(value, float), f"{where}: {key}={value!r} must be a float"
+        elif want in (int, bool):
+            assert type(value) is want, (where, key, value)
+        if isinstance(value, str) and value.endswith(".yaml"):
+            assert Path(value).is_file(), f"{where}: {key} -> missing {value}"
+
+
+def _flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+LAUNCH_CASES = [
+    {},
+    {"controller": "pid", "axes": "linear", "reference": "sine:amplitude=20,frequency_hz=0.25"},
+    {"recorder": "rosbag2", "executor": "single", "state_rate_hz": "50"},
+    {"deployment": "hosted", "mode": "realtime", "axes": "both"},
+]
+
+
 @pytest.mark.parametrize("path", LAUNCH_FILES, ids=lambda p: f"{p.parent.parent.name}/{p.name}")
-@pytest.mark.parametrize(
-    "overrides",
-    [
-        {},
-        {"controller": "pid", "axes": "linear", "reference": "sine:amplitude=20,frequency_hz=0.25"},
-    ],
-)
-def test_launch_files_start_existing_executables_with_valid_parameters(path, overrides):
-    nodes = _run_launch(path, overrides)
+@pytest.mark.parametrize("overrides", LAUNCH_CASES)
+def test_launch_files_start_existing_executables_with_valid_parameters(path, overrides, tmp_path):
+    args_of = {p: _launch_args(p) for p in LAUNCH_FILES}
+    overrides = {k: v for k, v in overrides.items() if k in args_of[path]}  # rig: no mode
+    overrides["out"] = str(tmp_path / "run")
+    actions = _run_launch(path, overrides)
+    nodes = [a for a in actions if type(a).__name__ == "Node"]
     assert nodes, f"{path.name} starts no node"
     scripts = {pkg: _console_scripts(pkg) for pkg in PACKAGES}
-    names = [n.kwargs["name"] for n in nodes]
+    names = [n.kwargs.get("name") for n in nodes if "name" in n.kwargs]
     assert len(names) == len(set(names))
-    assert "logger" in names and any(n.endswith("_controller") for n in names)
+    assert "logger" in names
+    hosted = overrides.get("deployment") == "hosted"
+    assert hosted or any(n.endswith("_controller") for n in names)
     for n in nodes:
         pkg, exe = n.kwargs["package"], n.kwargs["executable"]
         assert exe in scripts.get(pkg, {}), f"{path.name}: {pkg} has no executable {exe}"
-        declared = _node_param_types(pkg, exe)
         for entry in n.kwargs.get("parameters", []):
-            if isinstance(entry, str):  # a params file: must exist and have a section for this node
-                f = Path(entry)
-                assert f.is_file(), f"{path.name}: parameter file {entry} missing"
-                assert f.parent.name == "config" and f.parent.parent.name in PACKAGES
-                data = yaml.safe_load(f.read_text(encoding="utf-8"))
-                assert n.kwargs["name"] in data, f"{f.name} has no section {n.kwargs['name']}"
+            if isinstance(entry, dict):
+                _check_values(f"{path.name}: {exe}", _node_param_types(pkg, exe), entry)
                 continue
-            for key, value in entry.items():
-                assert key in declared, f"{path.name}: {exe} declares no parameter {key}"
-                want = declared[key]
-                if want is float:
-                    assert isinstance(value, float), f"{path.name}: {key}={value!r} must be a float"
-                elif want in (int, bool, str):
-                    assert type(value) is want or (want is str and key not in declared), (
-                        key,
-                        value,
+            f = Path(entry)  # a params file: its sections must be nodes of this process
+            assert f.is_file(), f"{path.name}: parameter file {entry} missing"
+            data = yaml.safe_load(f.read_text(encoding="utf-8"))
+            if exe == "controller_manager":
+                in_process = {
+                    "controller_manager": ("pneu_control", "controller_manager"),
+                    "pneu_sim": ("pneu_sim", "sim_node"),
+                    "pneu_driver": ("pneu_driver", "driver_node"),
+                    "linear_controller": ("pneu_control", "linear_controller"),
+                    "rotary_controller": ("pneu_control", "rotary_controller"),
+                }
+                for section, body in data.items():
+                    assert section in in_process, f"{f.name}: section {section}"
+                    _check_values(
+                        f"{path.name}: {section}",
+                        _node_param_types(*in_process[section]),
+                        _flatten(body["ros__parameters"]),
                     )
-                if isinstance(value, str) and value.endswith(".yaml"):
-                    assert Path(value).is_file(), f"{path.name}: {key} -> missing {value}"
-    if "axes" in overrides:
-        assert not any(n.kwargs["name"] == "rotary_controller" for n in nodes)
+            else:
+                assert f.parent.name == "config" and f.parent.parent.name in PACKAGES
+                assert n.kwargs["name"] in data, f"{f.name} has no section {n.kwargs['name']}"
+    if overrides.get("axes") == "linear":
+        assert "rotary_controller" not in names
+    recorders = [a for a in actions if type(a).__name__ == "ExecuteProcess"]
+    realtime = overrides.get("mode", "realtime" if "mode" not in args_of[path] else "lockstep")
+    if overrides.get("recorder") == "rosbag2" or realtime == "realtime":
+        (rec,) = recorders
+        cmd = rec.kwargs["cmd"]
+        assert cmd[:6] == ["ros2", "bag", "record", "-s", "mcap", "-o"]
+        assert cmd[6] == str(tmp_path / "run" / "bag")
+        qos = yaml.safe_load(Path(cmd[cmd.index("--qos-profile-overrides-path") + 1]).read_text())
+        topics = cmd[cmd.index("--topics") + 1 :]
+        assert sorted(qos) == sorted(topics) and "/pneu/linear/joint_state" in topics
+        logger = next(n for n in nodes if n.kwargs.get("name") == "logger")
+        assert logger.kwargs["parameters"][0]["recorder"] == "rosbag2"
+    else:
+        assert not recorders
 
 
-def test_sim_launch_waits_for_every_subscriber_it_starts():
+def _launch_args(path: Path) -> set[str]:
+    mods = _fake_launch_modules()
+    saved = {k: sys.modules.get(k) for k in mods}
+    sys.modules.update(mods)
+    try:
+        entities = runpy.run_path(str(path))["generate_launch_description"]()
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                sys.modules.pop(k, None)
+            else:
+                sys.modules[k] = v
+    return {e.args[0] for e in entities if type(e).__name__ == "DeclareLaunchArgument"}
+
+
+def test_a_launch_never_overwrites_a_run(tmp_path):
+    path = SRC / "pneu_sim" / "launch" / "sim.launch.py"
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "run.mcap").write_bytes(b"an earlier run")
+    with pytest.raises(RuntimeError, match="run.mcap exists; choose another out"):
+        _run_launch(path, {"out": str(tmp_path / "run")})
+
+
+def test_hosted_deployment_needs_realtime(tmp_path):
+    path = SRC / "pneu_sim" / "launch" / "sim.launch.py"
+    with pytest.raises(RuntimeError, match="mode:=realtime"):
+        _run_launch(path, {"deployment": "hosted", "out": str(tmp_path)})
+
+
+def test_sim_launch_waits_for_its_subscribers_and_ends_the_launch(tmp_path):
     path = SRC / "pneu_sim" / "launch" / "sim.launch.py"
     for axes, n_ctrl in (("both", 2), ("linear", 1)):
-        nodes = _run_launch(path, {"axes": axes})
-        sim = next(n for n in nodes if n.kwargs["executable"] == "sim_node")
+        nodes = _run_launch(path, {"axes": axes, "out": str(tmp_path / axes)})
+        sim = next(n for n in nodes if n.kwargs.get("executable") == "sim_node")
         params = sim.kwargs["parameters"][0]
-        assert params["lockstep.min_subscribers"] == n_ctrl + 1  # controllers + logger
+        assert params["startup.min_subscribers"] == 1  # every sensor topic recorded, at least
         assert sim.kwargs["on_exit"], "the run must end the launch when the sim finishes"
-        ctrl = [n for n in nodes if n.kwargs["name"].endswith("_controller")]
+        ctrl = [n for n in nodes if n.kwargs.get("name", "").endswith("_controller")]
         assert len(ctrl) == n_ctrl
         for c in ctrl:
             over = c.kwargs["parameters"][1]
             assert over["use_sim_time"] is True and over["mode"] == "lockstep"
 
 
-def test_reference_argument_becomes_typed_reference_parameters():
+def test_reference_argument_becomes_typed_reference_parameters(tmp_path):
     path = SRC / "pneu_sim" / "launch" / "sim.launch.py"
     nodes = _run_launch(
         path,
         {
             "reference": "sine:amplitude=20,frequency_hz=0.25",
             "rotary_reference": "constant:value=800",
+            "out": str(tmp_path),
         },
     )
     by = {
         n.kwargs["name"]: n.kwargs["parameters"][1]
         for n in nodes
-        if n.kwargs["name"].endswith("_controller")
+        if n.kwargs.get("name", "").endswith("_controller")
     }
     assert by["linear_controller"]["reference.amplitude"] == 20.0
     assert isinstance(by["linear_controller"]["reference.amplitude"], float)

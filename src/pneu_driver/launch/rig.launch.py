@@ -18,7 +18,9 @@ from ament_index_python.packages import get_package_share_directory
 from launch.actions import Shutdown
 from launch_ros.actions import Node
 from pneu_msgs_py.nodes.launch_graph import (
+    common_parameters,
     controller_and_logger_nodes,
+    hosted_manager,
     launch_arguments,
     launch_description,
 )
@@ -32,20 +34,23 @@ ARGS = [
 
 def _setup(arg: dict[str, str]) -> list:
     config = os.path.join(get_package_share_directory("pneu_driver"), "config")
-    driver = Node(
-        package="pneu_driver",
-        executable="driver_node",
-        name="pneu_driver",
-        output="screen",
-        parameters=[
-            {
-                "rig_file": arg["rig_file"] or os.path.join(config, "rig.yaml"),
-                "safety_file": os.path.join(config, "safety.yaml"),
-                "axes": arg["axes"],
-            }
-        ],
-        on_exit=[Shutdown(reason="driver stopped")],
-    )
+    params = {
+        "rig_file": arg["rig_file"] or os.path.join(config, "rig.yaml"),
+        "safety_file": os.path.join(config, "safety.yaml"),
+        "axes": arg["axes"],
+    }
+    exit_action = [Shutdown(reason="driver stopped")]
+    if arg["deployment"] == "hosted":
+        driver = hosted_manager(arg, config, "rig", "pneu_driver", params, on_exit=exit_action)
+    else:
+        driver = Node(
+            package="pneu_driver",
+            executable="driver_node",
+            name="pneu_driver",
+            output="screen",
+            parameters=[{**params, **common_parameters(arg)}],
+            on_exit=exit_action,
+        )
     return [driver, *controller_and_logger_nodes(arg, config, mode="realtime", out=arg["out"])]
 
 

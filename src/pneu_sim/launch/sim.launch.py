@@ -19,8 +19,9 @@ from ament_index_python.packages import get_package_share_directory
 from launch.actions import Shutdown
 from launch_ros.actions import Node
 from pneu_msgs_py.nodes.launch_graph import (
-    AXES_OF,
+    common_parameters,
     controller_and_logger_nodes,
+    hosted_manager,
     launch_arguments,
     launch_description,
 )
@@ -56,27 +57,34 @@ ARGS = [
 
 def _setup(arg: dict[str, str]) -> list:
     config = os.path.join(get_package_share_directory("pneu_sim"), "config")
-    sim = Node(
-        package="pneu_sim",
-        executable="sim_node",
-        name="pneu_sim",
-        output="screen",
-        parameters=[
-            {
-                "mode": arg["mode"],
-                "axes": arg["axes"],
-                "duration_s": float(arg["duration"]),
-                "seed": int(arg["seed"]),
-                "safety": arg["safety"] == "true",
-                "plant_file": os.path.join(config, "plant.yaml"),
-                "safety_file": os.path.join(config, "safety.yaml"),
-                "faults": arg["faults"],
-                # the controllers and the logger
-                "lockstep.min_subscribers": len(AXES_OF[arg["axes"]]) + 1,
-            }
-        ],
-        on_exit=[Shutdown(reason="simulation finished")],
-    )
+    hosted = arg["deployment"] == "hosted"
+    if hosted and arg["mode"] != "realtime":
+        raise RuntimeError("deployment:=hosted runs in real time: add mode:=realtime")
+    params = {
+        "mode": arg["mode"],
+        "axes": arg["axes"],
+        "duration_s": float(arg["duration"]),
+        "seed": int(arg["seed"]),
+        "safety": arg["safety"] == "true",
+        "plant_file": os.path.join(config, "plant.yaml"),
+        "safety_file": os.path.join(config, "safety.yaml"),
+        "faults": arg["faults"],
+        # before sample 0: every sensor topic matched by its subscribers (the controllers
+        # take 3 / 1 of the 5 topics, so at least the recorder or the logger)
+        "startup.min_subscribers": 1,
+    }
+    exit_action = [Shutdown(reason="simulation finished")]
+    if hosted:
+        sim = hosted_manager(arg, config, "sim", "pneu_sim", params, on_exit=exit_action)
+    else:
+        sim = Node(
+            package="pneu_sim",
+            executable="sim_node",
+            name="pneu_sim",
+            output="screen",
+            parameters=[{**params, **common_parameters(arg)}],
+            on_exit=exit_action,
+        )
     return [sim, *controller_and_logger_nodes(arg, config, mode=arg["mode"], out=arg["out"])]
 
 

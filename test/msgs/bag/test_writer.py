@@ -133,7 +133,7 @@ def test_rosbags_anyreader_decodes_everything(tmp_path):
         n = sum(1 for c, t, raw in r.messages() if r.deserialize(raw, c.msgtype) is not None)
         assert n == 1500 * 9 + 2 + 2
         q = conns["/pneu/pressure/cylinder_1"].ext.offered_qos_profiles[0]
-        assert q.reliability.name == "BEST_EFFORT" and q.depth == 5
+        assert q.reliability.name == "RELIABLE" and q.depth == 100  # realtime sensor publisher
 
 
 def test_schema_texts_are_jazzy_definitions(tmp_path):

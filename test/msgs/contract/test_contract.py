@@ -28,6 +28,7 @@ from pneu_msgs_py.contract.topics import (
     TOPICS,
     markdown_table,
     qos_for,
+    sub_qos_for,
 )
 from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys import Stores, get_typestore
@@ -112,8 +113,11 @@ def test_qos_choices_are_compatible_pairs():
         lock = qos_for(t.name, "lockstep")
         assert lock.reliability == "reliable"  # lockstep loses nothing
         rt = qos_for(t.name, "realtime")
+        sub = sub_qos_for(t.name, "realtime")
+        assert Q.compatible(rt, sub)  # the graph's own consumers connect
+        assert Q.compatible(rt, Q.QosProfile(depth=100, reliability="reliable"))  # recorders too
         if t.kind in ("pressure", "joint_state"):
-            assert rt == Q.SENSOR_DATA
+            assert rt == Q.SENSOR_PUB and sub == Q.SENSOR_DATA
     with pytest.raises(ValueError, match="qos mode"):
         qos_for("/clock", "fast")
     with pytest.raises(ValueError, match="reliability"):

@@ -1,102 +1,109 @@
-"""Per-sample work of a controller node, without ROS: messages in, core, messages out.
+"""Per-sample work of a controller, without ROS: raw CDR in, the core, raw CDR out.
 
 The rclpy node (:mod:`pneu_control.nodes.controller_node`) only subscribes,
 publishes and declares parameters; everything it does per sample is here, so
-it is tested and benchmarked without rclpy (with rosbags' Jazzy message
-classes, which have rclpy's fields):
+it is tested and benchmarked without rclpy. Every message is raw CDR bytes
+(:mod:`pneu_msgs_py.contract.wire`): rclpy's message conversion is skipped
+both ways (DESIGN §10).
 
-1. :meth:`ControllerShellCore.on_message` -- collect the five sensor messages
-   of one tick (three FluidPressure, two JointState, published separately and
-   possibly interleaved across topics) by stamp; when a tick is complete,
-   rebuild the :class:`SensorSample` (:func:`pneu_msgs_py.contract.convert.sample_from_msgs`);
+1. :meth:`ControllerShellCore.on_raw` -- collect, by stamp, the sensor
+   payloads of one tick on the axis' input topics only (:data:`INPUT_TOPICS`:
+   linear -- its joint state and the two chamber pressures; rotary -- its
+   joint state); when a tick is complete, rebuild the
+   :class:`SensorSample` (fields of topics not taken are NaN: no algorithm of
+   that axis reads them);
 2. :meth:`ControllerShellCore.update` -- ``AxisController.update``;
-3. :meth:`ControllerShellCore.fill_outputs` -- the valve command (stamped with
-   the sample it answers) and the controller state (every sample).
+3. :meth:`ControllerShellCore.answer` -- the valve command (stamped with the
+   sample it answers) and, every ``state_every`` ticks, the controller state.
 
-The controller sees the whole sample, as in the in-process runner, so a
-lockstep ROS run gives the runner's numbers.
+Hosted (one-process) deployments call :meth:`update` and :meth:`answer` with
+a whole sample instead of step 1. Same sample, same numbers: a lockstep ROS
+run gives the in-process runner's results.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
 from typing import Any
 
-from pneu_msgs_py.contract.convert import (
-    DiagStatus,
-    fill_controller_state,
-    fill_valve_command,
-    sample_from_msgs,
-    stamp_to_ns,
-)
+from pneu_msgs_py.contract.convert import DiagStatus
 from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.contract.topics import JOINT_STATE_TOPIC, PRESSURE_TOPICS
+from pneu_msgs_py.contract.wire import CommandWire, SensorWire, StateWire
 
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
 
-__all__ = [
-    "SENSOR_TOPICS",
-    "SampleAssembler",
-    "ControllerShellCore",
-]
+__all__ = ["INPUT_TOPICS", "SampleAssembler", "ControllerShellCore"]
 
-#: The five topics one sample is published on, in the order the sim and driver publish them.
-SENSOR_TOPICS: tuple[str, ...] = (
-    *PRESSURE_TOPICS,
-    JOINT_STATE_TOPIC["linear"],
-    JOINT_STATE_TOPIC["rotary"],
-)
-_P_TOPICS = tuple(PRESSURE_TOPICS)
+_P = tuple(PRESSURE_TOPICS)
+#: The sensor topics each axis' controller takes (its algorithms read nothing else).
+INPUT_TOPICS: dict[str, tuple[str, ...]] = {
+    "linear": (_P[0], _P[1], JOINT_STATE_TOPIC["linear"]),
+    "rotary": (JOINT_STATE_TOPIC["rotary"],),
+}
+_NAN = math.nan
 
 
 class SampleAssembler:
-    """Groups the sensor messages of one tick by ``header.stamp``.
+    """Groups the decoded sensor payloads of one tick by stamp.
 
-    A tick is emitted once all five topics have a message with its stamp.
-    A message with a newer stamp abandons an incomplete older tick (counted in
-    :attr:`incomplete`: a lost best-effort message); a message older than the
-    tick being collected is dropped (:attr:`late`).
+    A tick is emitted once every topic of ``topics`` has a payload with its
+    stamp. A payload with a newer stamp abandons an incomplete older tick
+    (counted in :attr:`incomplete`: a lost best-effort message); one older than
+    the tick being collected is dropped (:attr:`late`).
     """
 
-    __slots__ = ("_msgs", "_stamp", "emitted", "incomplete", "late")
+    __slots__ = ("_fields", "_got", "_n", "_stamp", "emitted", "incomplete", "late")
 
-    def __init__(self) -> None:
+    def __init__(self, topics: tuple[str, ...]) -> None:
+        self._n = len(topics)
         self._stamp = -1
-        self._msgs: dict[str, Any] = {}
+        self._got: set[str] = set()
+        self._fields: dict[str, float] = {}
         self.emitted = 0
         self.incomplete = 0
         self.late = 0
 
-    def add(self, topic: str, msg: Any) -> dict[str, Any] | None:
-        """Add one message; returns ``{topic: msg}`` of a complete tick, else None."""
-        stamp = stamp_to_ns(msg.header.stamp)
-        if stamp != self._stamp:
-            if stamp < self._stamp:
+    def add(self, topic: str, stamp_ns: int, fields: dict[str, float]) -> tuple | None:
+        """Add one topic's fields; ``(stamp_ns, fields)`` of a complete tick, else None."""
+        if stamp_ns != self._stamp:
+            if stamp_ns < self._stamp:
                 self.late += 1
                 return None
-            if self._msgs:
+            if self._got:
                 self.incomplete += 1
-            self._stamp = stamp
-            self._msgs = {}
-        self._msgs[topic] = msg
-        if len(self._msgs) < len(SENSOR_TOPICS):
+            self._stamp = stamp_ns
+            self._got = set()
+            self._fields = {}
+        self._got.add(topic)
+        self._fields.update(fields)
+        if len(self._got) < self._n:
             return None
-        done, self._msgs = self._msgs, {}
+        done, self._fields, self._got = self._fields, {}, set()
         self.emitted += 1
-        return done
+        return stamp_ns, done
 
 
 class ControllerShellCore:
     """Everything a controller node does per sample (see the module docstring)."""
 
-    def __init__(self, axis: str, params: Any):
+    def __init__(self, axis: str, params: Any, state_every: int = 1):
+        if state_every < 1:
+            raise ValueError(f"state_every: {state_every!r} refused; allowed: an integer >= 1")
         self.axis = axis
         self.controller = AxisController(axis, params)
-        self.assembler = SampleAssembler()
+        self.topics = INPUT_TOPICS[axis]
+        self.assembler = SampleAssembler(self.topics)
+        self.sensors = SensorWire()
+        self.commands = CommandWire(axis)
+        self.states = StateWire(STATE_FIELDS)
+        self.state_every = int(state_every)
+        self._period_ns = round(params.sample_time_s * 1e9)
         self.n_samples = 0
         self.n_saturated = 0
+        self.n_bad = 0
         self.last_stamp_ns = -1
-        self.last_u = float("nan")
+        self.last_u = _NAN
         self.param_changes = 0
 
     @property
@@ -109,19 +116,29 @@ class ControllerShellCore:
         self.param_changes += 1
 
     # -- per sample -------------------------------------------------------
-    def on_message(self, topic: str, msg: Any) -> SensorSample | None:
-        """One sensor message in; the rebuilt sample when its tick is complete."""
-        tick = self.assembler.add(topic, msg)
+    def on_raw(self, topic: str, data: bytes) -> SensorSample | None:
+        """One sensor payload in; the rebuilt sample when its tick is complete."""
+        try:
+            stamp, fields = self.sensors.decode(topic, data)
+        except ValueError:
+            self.n_bad += 1
+            return None
+        tick = self.assembler.add(topic, stamp, fields)
         if tick is None:
             return None
-        p = _P_TOPICS
-        return sample_from_msgs(
+        stamp, f = tick
+        g = f.get
+        counts = g("counts", 0.0)
+        return SensorSample(
             self.n_samples,
-            tick[p[0]],
-            tick[p[1]],
-            tick[p[2]],
-            tick[SENSOR_TOPICS[3]],
-            tick[SENSOR_TOPICS[4]],
+            stamp,
+            g("p_c1", _NAN),
+            g("p_c2", _NAN),
+            g("p_m1", _NAN),
+            g("x", _NAN),
+            g("theta", _NAN),
+            g("omega", _NAN),
+            int(counts) if counts == counts else 0,
         )
 
     def update(self, sample: SensorSample) -> float:
@@ -135,35 +152,40 @@ class ControllerShellCore:
             self.n_saturated += 1
         return u
 
-    def fill_outputs(self, cmd_msg: Any, state_msg: Any, stamp_ns: int, u: float) -> None:
-        """Valve command (stamp = the answered sample) and controller state, in place."""
-        fill_valve_command(cmd_msg, self.axis, stamp_ns, u)
-        fill_controller_state(
-            state_msg,
-            stamp_ns,
-            STATE_FIELDS,
-            self.controller.state_values(),
-            self.controller.algorithm,
-        )
+    def answer(self, stamp_ns: int, u: float) -> tuple[bytes, bytes | None]:
+        """The command payload (stamp = the answered sample) and, every ``state_every``
+        ticks (by the sample's index on the clock), the controller-state payload."""
+        cmd = self.commands.encode(stamp_ns, u)
+        if self.state_every != 1 and (stamp_ns // self._period_ns) % self.state_every:
+            return cmd, None
+        c = self.controller
+        return cmd, self.states.encode(stamp_ns, c.state_values(), c.algorithm)
 
-    def step(self, topic: str, msg: Any, cmd_msg: Any, state_msg: Any) -> bool:
-        """The whole per-message path; True when a command was computed into ``cmd_msg``."""
-        s = self.on_message(topic, msg)
+    def step_raw(self, topic: str, data: bytes) -> tuple[bytes, bytes | None] | None:
+        """The whole per-payload path: (command, state or None) when a tick completed."""
+        s = self.on_raw(topic, data)
         if s is None:
-            return False
-        u = self.update(s)
-        self.fill_outputs(cmd_msg, state_msg, s.stamp_ns, u)
-        return True
+            return None
+        return self.answer(s.stamp_ns, self.update(s))
+
+    def neutral_command(self) -> bytes | None:
+        """The neutral command for the last answered sample (the node's last word), or None."""
+        if self.last_stamp_ns < 0:
+            return None
+        return self.commands.encode(self.last_stamp_ns, self.params.limits.u_neutral)
 
     # -- reports ----------------------------------------------------------
     def diagnostics(self, node_name: str) -> list[DiagStatus]:
-        """One ``/diagnostics`` status: OK, or WARN when ticks were lost or inputs non-finite."""
+        """One ``/diagnostics`` status: OK, or WARN when ticks were lost or inputs bad."""
         a = self.assembler
         nonfinite = self.controller.n_nonfinite
-        level = 1 if (a.incomplete or a.late or nonfinite) else 0
+        level = 1 if (a.incomplete or a.late or nonfinite or self.n_bad) else 0
         msg = "running" if self.n_samples else "waiting for samples"
         if level:
-            msg = f"{a.incomplete} incomplete / {a.late} late ticks, {nonfinite} non-finite inputs"
+            msg = (
+                f"{a.incomplete} incomplete / {a.late} late ticks, {nonfinite} non-finite "
+                f"inputs, {self.n_bad} malformed payloads"
+            )
         return [
             DiagStatus(
                 level=level,
@@ -176,37 +198,13 @@ class ControllerShellCore:
                     "incomplete_ticks": str(a.incomplete),
                     "late_messages": str(a.late),
                     "nonfinite_inputs": str(nonfinite),
+                    "malformed_payloads": str(self.n_bad),
                     "saturated_samples": str(self.n_saturated),
                     "last_stamp_ns": str(self.last_stamp_ns),
                     "last_command_v": f"{self.last_u:.6g}",
                     "parameter_changes": str(self.param_changes),
+                    "input_topics": ",".join(self.topics),
+                    "state_every": str(self.state_every),
                 },
             )
         ]
-
-
-def new_sensor_messages(types: Mapping[str, Any]) -> dict[str, Any]:
-    """Empty FluidPressure/JointState messages per sensor topic from a ``{ros_type: class}`` map."""
-    return {
-        topic: _new(
-            types,
-            "sensor_msgs/msg/FluidPressure"
-            if topic in PRESSURE_TOPICS
-            else "sensor_msgs/msg/JointState",
-        )
-        for topic in SENSOR_TOPICS
-    }
-
-
-def _new(types: Mapping[str, Any], name: str) -> Any:
-    """A default-constructed message of a rosbags typestore class (all fields required there)."""
-    import numpy as np
-
-    cls = types[name]
-    Time = types["builtin_interfaces/msg/Time"]
-    Header = types["std_msgs/msg/Header"]
-    header = Header(stamp=Time(sec=0, nanosec=0), frame_id="")
-    if name == "sensor_msgs/msg/FluidPressure":
-        return cls(header=header, fluid_pressure=0.0, variance=0.0)
-    empty = np.zeros(0)
-    return cls(header=header, name=[], position=empty, velocity=empty, effort=empty)

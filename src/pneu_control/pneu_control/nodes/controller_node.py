@@ -1,13 +1,21 @@
 """``linear_controller`` / ``rotary_controller``: an AxisController as an rclpy node.
 
-Event-driven: the five sensor topics feed :class:`~pneu_control.nodes.controller_core.ControllerShellCore`,
-which computes when a tick is complete; the command (stamped with the
-sample it answers) and the controller state are published from that
-callback -- no timer in the loop. Every field of :class:`AxisControllerParams`
+Event-driven: raw (CDR bytes) subscriptions to the axis' input topics only
+feed :class:`~pneu_control.nodes.controller_core.ControllerShellCore`, which
+computes when a tick is complete; the command (stamped with the sample it
+answers) is published from that callback as pre-serialised bytes -- no timer
+in the loop, no message conversion. The controller state follows every
+``state_every`` ticks (parameter ``state_rate_hz``: every tick in lockstep,
+100 Hz in realtime by default). Every field of :class:`AxisControllerParams`
 is a parameter with a descriptor (description, range, read-only); defaults
 come from ``controllers_file`` (config/controllers.yaml), ROS overrides win.
 A change is validated as one set before rclpy stores it (on-set callback),
 applied after (post-set), and takes effect at the next sample, bumplessly.
+
+``hosted=True`` (the one-process deployment, :mod:`.controller_manager`):
+no sensor subscriptions; the host's 1 kHz loop calls :meth:`ControllerNode.compute`
+with each sample and the node publishes the command and state for monitoring,
+while its parameters stay live (``ros2 param set /linear_controller ...``).
 """
 
 from __future__ import annotations
@@ -15,13 +23,15 @@ from __future__ import annotations
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from pneu_msgs_py.contract.convert import fill_diagnostic_array, fill_valve_command
+from pneu_msgs_py.contract.convert import fill_diagnostic_array
 from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
+from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.contract.topics import (
     CONTROLLER_STATE_TOPIC,
     DIAGNOSTICS_TOPIC,
     VALVE_COMMAND_TOPIC,
     qos_for,
+    sub_qos_for,
 )
 from pneu_msgs_py.nodes.run import ShellDefaults, run_node
 from pneu_msgs_py.params.core import ParamError
@@ -40,13 +50,18 @@ from sensor_msgs.msg import FluidPressure, JointState
 
 from pneu_control.controller.axis import AxisController
 from pneu_control.controller.params import load_controller_params
-from pneu_control.nodes.controller_core import SENSOR_TOPICS, ControllerShellCore
+from pneu_control.nodes.controller_core import ControllerShellCore
+
+#: Controller-state rate when ``state_rate_hz`` is 0: every tick in lockstep (the runner's
+#: layout), 100 Hz in realtime (for people and plots; the bag keeps every command).
+STATE_RATE_AUTO_HZ = {"lockstep": 0.0, "realtime": 100.0}
 
 
 class ControllerNode(ShellDefaults, Node):
-    def __init__(self, axis: str, **node_kwargs):
+    def __init__(self, axis: str, hosted: bool = False, **node_kwargs):
         super().__init__(f"{axis}_controller", **node_kwargs)
         self.axis = axis
+        self.hosted = hosted
         ro = {"read_only": True}
         self.declare_parameter(
             "controllers_file",
@@ -65,9 +80,20 @@ class ControllerNode(ShellDefaults, Node):
                 **ro,
             ),
         )
+        self.declare_parameter(
+            "state_rate_hz",
+            0.0,
+            ParameterDescriptor(
+                description="controller_state rate (the command goes out every tick); 0 = every "
+                "tick in lockstep, 100 Hz in realtime",
+                floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1000.0)],
+                **ro,
+            ),
+        )
         mode = self.get_parameter("mode").value
         if mode not in ("lockstep", "realtime"):
             raise ParamError("mode", mode, "one of lockstep, realtime")
+        rate = self.get_parameter("state_rate_hz").value or STATE_RATE_AUTO_HZ[mode]
         base = load_controller_params(axis, self.get_parameter("controllers_file").value or None)
         decls = declarations(base, ParameterDescriptor, FloatingPointRange, IntegerRange)
         self.declare_parameters("", decls)
@@ -78,12 +104,12 @@ class ControllerNode(ShellDefaults, Node):
             raise ValueError(reason)
         self.specs = specs_by_name(params)
         self.params = params  # the newest accepted set
-        self.core = ControllerShellCore(axis, params)
+        every = max(1, round(1.0 / (rate * params.sample_time_s))) if rate else 1
+        self.core = ControllerShellCore(axis, params, state_every=every)
         self.add_pre_set_parameters_callback(self._coerce)
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
 
-        self.cmd_msg, self.state_msg = JointState(), JointState()
         self.cmd_pub = self.create_publisher(
             JointState,
             VALVE_COMMAND_TOPIC[axis],
@@ -97,26 +123,44 @@ class ControllerNode(ShellDefaults, Node):
         self.diag_pub = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
         )
-        for topic in SENSOR_TOPICS:
-            msg_type = FluidPressure if "pressure" in topic else JointState
+        for topic in () if hosted else self.core.topics:
+            # raw=True: the callback gets the CDR bytes; one argument (rclpy 7.1.9's
+            # EventsExecutor fails on callbacks that also take a MessageInfo)
             self.create_subscription(
-                msg_type,
+                FluidPressure if "pressure" in topic else JointState,
                 topic,
-                lambda msg, t=topic: self._on_sensor(t, msg),
-                to_rclpy(qos_for(topic, mode), rq),
+                lambda data, t=topic: self._on_sensor(t, data),
+                to_rclpy(sub_qos_for(topic, mode), rq),
+                raw=True,
             )
         # diagnostics at 1 Hz of wall time (steady clock): works whether /clock runs or not,
         # and with executors whose timers do not follow sim time; stamps use the node clock
         self.create_timer(
             1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME)
         )
-        self.get_logger().info(f"{axis} controller ({params.algorithm}), {mode} QoS")
+        self.get_logger().info(
+            f"{axis} controller ({params.algorithm}), {mode} QoS, "
+            + ("hosted by the 1 kHz loop" if hosted else f"inputs {', '.join(self.core.topics)}")
+            + f", state every {every} tick(s)"
+        )
 
     # -- per sample: everything in the core ---------------------------------
-    def _on_sensor(self, topic: str, msg) -> None:
-        if self.core.step(topic, msg, self.cmd_msg, self.state_msg):
-            self.cmd_pub.publish(self.cmd_msg)
-            self.state_pub.publish(self.state_msg)
+    def _on_sensor(self, topic: str, data: bytes) -> None:
+        out = self.core.step_raw(topic, data)
+        if out is not None:
+            self.cmd_pub.publish(out[0])
+            if out[1] is not None:
+                self.state_pub.publish(out[1])
+
+    def compute(self, s: SensorSample) -> float:
+        """Hosted mode: the host's loop hands over sample ``s``; returns u (V) and publishes
+        the command and state (monitoring and bags)."""
+        u = self.core.update(s)
+        cmd, state = self.core.answer(s.stamp_ns, u)
+        self.cmd_pub.publish(cmd)
+        if state is not None:
+            self.state_pub.publish(state)
+        return u
 
     # -- parameters ----------------------------------------------------------
     def _coerce(self, params: list[Parameter]) -> list[Parameter]:
@@ -161,11 +205,9 @@ class ControllerNode(ShellDefaults, Node):
 
     def publish_neutral(self) -> None:
         """Last word: the neutral command for the last answered sample (driver writes 5 V now)."""
-        if self.core.last_stamp_ns >= 0:
-            u0 = self.params.limits.u_neutral
-            self.cmd_pub.publish(
-                fill_valve_command(JointState(), self.axis, self.core.last_stamp_ns, u0)
-            )
+        data = self.core.neutral_command()
+        if data is not None:
+            self.cmd_pub.publish(data)
 
 
 def main_linear(args=None) -> int:

@@ -1,9 +1,21 @@
 """The logger node's work without ROS: serialized messages in, the run's MCAP out.
 
-The logger node subscribes to every pneu topic with ``raw=True`` and hands
-the CDR bytes here untouched (no decode on the hot path);
-:class:`LoggerCore` writes them with :meth:`BagWriter.write_serialized` and,
-on :meth:`close`, the metadata:
+Two ways to record a ROS run (the launch files' ``recorder`` argument):
+
+``pneu``
+    The logger node subscribes to every pneu topic with ``raw=True`` and hands
+    the CDR bytes here untouched (no decode on the hot path);
+    :class:`LoggerCore` writes them with :meth:`BagWriter.write_serialized`
+    and, on :meth:`close`, the metadata below -- one ``.mcap`` laid out as the
+    in-process runner's.
+``rosbag2``
+    ``ros2 bag record -s mcap`` (C++, what ROS users trust; it keeps up at any
+    rate) records the topics into a rosbag2 directory, and the logger node
+    only gathers the graph's parameters: :meth:`close` writes the metadata
+    records as the sidecar :data:`SIDECAR` in that directory, which
+    :func:`pneu_msgs_py.bag.reader.read_run` merges into the run's metadata.
+
+The metadata:
 
 - ``pneu.run``, ``pneu.safety``, ``pneu.faults`` -- the records the
   in-process runner writes (``config_json``: axes, seed, duration,
@@ -30,13 +42,20 @@ from pathlib import Path
 from typing import Any
 
 from pneu_msgs_py.bag import BagWriter
+from pneu_msgs_py.bag.reader import SIDECAR
 from pneu_msgs_py.contract.topics import TOPICS
 from pneu_msgs_py.params.core import flatten, to_dict
 
 from pneu_control.controller.axis import STATE_FIELDS
 from pneu_control.experiment.bag_log import RUN_METADATA, run_metadata
 
-__all__ = ["LOGGED_TOPICS", "LoggerCore", "stamp_from_cdr", "run_config_from_params"]
+__all__ = [
+    "LOGGED_TOPICS",
+    "LoggerCore",
+    "SIDECAR",
+    "stamp_from_cdr",
+    "run_config_from_params",
+]
 
 #: (topic, ros type) of everything the logger records: the topic table.
 LOGGED_TOPICS: tuple[tuple[str, str], ...] = tuple((t.name, t.ros_type) for t in TOPICS)
@@ -144,17 +163,44 @@ def run_config_from_params(node_params: Mapping[str, Mapping[str, Any]]) -> dict
     return out
 
 
-class LoggerCore:
-    """Write raw CDR messages and the graph's parameters to one MCAP file."""
+def _warm_imports() -> None:
+    """Import what :func:`run_config_from_params` uses (the twin's modules, numba): seconds on a
+    busy machine, which a Ctrl-C'd node must not spend before its bag is closed."""
+    import pneu_driver.safety  # noqa: F401
+    import pneu_sim.faults.injection
+    import pneu_sim.nodes.sim_core
+    import pneu_sim.physics.plant_file  # noqa: F401
 
-    def __init__(self, path: str | Path, *, mode: str = "lockstep", compression: str = "zstd"):
+    import pneu_control.controller.params
+    import pneu_control.experiment.session  # noqa: F401
+
+
+class LoggerCore:
+    """Write raw CDR messages and the graph's parameters to one MCAP file (``record``), or
+    only the parameters, as the sidecar of a rosbag2 directory ``path`` (see module docstring)."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        mode: str = "lockstep",
+        compression: str = "zstd",
+        record: bool = True,
+    ):
         self.path = Path(path)
         self.mode = mode
-        self.writer = BagWriter(
-            self.path, controller_state_fields=STATE_FIELDS, qos=mode, compression=compression
+        self.record = record
+        self.closed = False
+        self.writer = (
+            BagWriter(
+                self.path, controller_state_fields=STATE_FIELDS, qos=mode, compression=compression
+            )
+            if record
+            else None
         )
         self.node_params: dict[str, dict[str, Any]] = {}
         self.changes: list[dict[str, Any]] = []
+        _warm_imports()  # what close() needs, loaded now: a shutdown must be quick
         self.counts: dict[str, int] = {}
         self.bad = 0
         self._lockstep = mode == "lockstep"
@@ -163,6 +209,8 @@ class LoggerCore:
         self, topic: str, ros_type: str, data: bytes, receive_ns: int, source_ns: int
     ) -> None:
         """One serialized message (times int ns; see the module docstring for which are used)."""
+        if self.writer is None:
+            return
         if self._lockstep:
             try:
                 receive_ns = source_ns = stamp_from_cdr(data)
@@ -195,12 +243,32 @@ class LoggerCore:
             }
         return out
 
-    def close(self) -> None:
-        """Write the metadata and finish the file (summary, footer); idempotent."""
-        if self.writer.closed:
-            return
+    def close(self) -> Path:
+        """Write the metadata and finish the file (summary, footer); idempotent. Returns the
+        file written (the bag, or the sidecar)."""
+        if self.closed:
+            return self.path if self.record else self.sidecar_path
+        self.closed = True
+        if self.writer is None:
+            return self._write_sidecar()
         try:
             for name, rec in self.metadata().items():
                 self.writer.add_metadata(name, rec)
         finally:
             self.writer.close()
+        return self.path
+
+    @property
+    def sidecar_path(self) -> Path:
+        """Inside the rosbag2 directory if the recorder made it, else beside where it would be."""
+        if self.path.is_dir():
+            return self.path / SIDECAR
+        return self.path.parent / f"{self.path.name}.{SIDECAR}"
+
+    def _write_sidecar(self) -> Path:
+        """The metadata records as JSON, written under a temporary name and renamed."""
+        path = self.sidecar_path
+        tmp = path.with_name(path.name + ".partial")
+        tmp.write_text(json.dumps(self.metadata(), indent=1, sort_keys=True) + "\n")
+        tmp.replace(path)
+        return path

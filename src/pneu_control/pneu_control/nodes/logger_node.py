@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import sys
+import time
 from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -29,7 +30,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import FluidPressure, JointState
 
-from pneu_control.nodes.logger_core import LOGGED_TOPICS, LoggerCore
+from pneu_control.nodes.logger_core import LOGGED_TOPICS, SIDECAR, LoggerCore
 
 _TYPES = {
     "sensor_msgs/msg/FluidPressure": FluidPressure,
@@ -47,7 +48,24 @@ class LoggerNode(ShellDefaults, Node):
             "out", ".", ParameterDescriptor(description="output directory", **ro)
         )
         self.declare_parameter(
-            "bag_name", "run.mcap", ParameterDescriptor(description="bag file name", **ro)
+            "bag_name",
+            "run.mcap",
+            ParameterDescriptor(
+                description="the bag in 'out': the .mcap this node writes (recorder pneu), or "
+                "the rosbag2 directory ros2 bag record writes (recorder rosbag2)",
+                **ro,
+            ),
+        )
+        self.declare_parameter(
+            "recorder",
+            "pneu",
+            ParameterDescriptor(
+                description="pneu: record every pneu topic and the run metadata into one .mcap; "
+                "rosbag2: ros2 bag record records the topics, this node writes only the run "
+                f"metadata ({SIDECAR}) into its bag directory",
+                additional_constraints="one of pneu, rosbag2",
+                **ro,
+            ),
         )
         self.declare_parameter(
             "mode",
@@ -70,22 +88,32 @@ class LoggerNode(ShellDefaults, Node):
         mode = self.get_parameter("mode").value
         if mode not in ("lockstep", "realtime"):
             raise ValueError(f"mode: {mode!r} refused; allowed: one of lockstep, realtime")
+        recorder = self.get_parameter("recorder").value
+        if recorder not in ("pneu", "rosbag2"):
+            raise ValueError(f"recorder: {recorder!r} refused; allowed: one of pneu, rosbag2")
         out = Path(self.get_parameter("out").value).expanduser()
         out.mkdir(parents=True, exist_ok=True)
         self.path = out / self.get_parameter("bag_name").value
+        record = recorder == "pneu"
         self.core = LoggerCore(
-            self.path, mode=mode, compression=self.get_parameter("compression").value
+            self.path,
+            mode=mode,
+            compression=self.get_parameter("compression").value,
+            record=record,
         )
-        for topic, ros_type in LOGGED_TOPICS:
+        for topic, ros_type in LOGGED_TOPICS if record else ():
             prof = qos_for(topic, mode)
             prof = dataclasses.replace(
                 prof, depth=max(prof.depth, 1000)
             )  # a slow disk loses nothing
+            # raw bytes, one-argument callback (rclpy 7.1.9's EventsExecutor fails on callbacks
+            # that also take a MessageInfo); realtime log time = receive time on the system
+            # clock, as rosbag2 records it
             self.create_subscription(
                 _TYPES[ros_type],
                 topic,
-                lambda data, info, t=topic, r=ros_type: self.core.on_message(
-                    t, r, data, info["received_timestamp"], info["source_timestamp"]
+                lambda data, t=topic, r=ros_type: self.core.on_message(
+                    t, r, data, *((time.time_ns(),) * 2)
                 ),
                 to_rclpy(prof, rq),
                 raw=True,
@@ -102,13 +130,17 @@ class LoggerNode(ShellDefaults, Node):
         self._param_clients: dict[str, AsyncParameterClient] = {}  # (Node.clients is rclpy's)
         self._pending: set[str] = set()
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(1.0, self._discover, clock=steady)
+        self.create_timer(0.25, self._discover, clock=steady)  # parameters of every node, early
         self.create_timer(1.0, self._diagnostics, clock=steady)
-        self.get_logger().info(f"logging to {self.path} ({mode})")
+        self.get_logger().info(
+            f"logging to {self.path} ({mode})"
+            if record
+            else f"run metadata for the rosbag2 bag {self.path} ({mode})"
+        )
 
     def safe_shutdown(self) -> None:
-        self.core.close()  # metadata, summary, footer: the bag is complete
-        print(f"logger: wrote {self.path}", file=sys.stderr)
+        written = self.core.close()  # metadata, summary, footer: the bag is complete
+        print(f"logger: wrote {written}", file=sys.stderr)
 
     # -- parameters of the graph -------------------------------------------
     def _discover(self) -> None:

@@ -1,14 +1,17 @@
-"""The ROS lockstep graph without ROS: sim shell core and controller shell cores over CDR.
+"""The ROS lockstep graph without ROS: the sim's cycle and the controller shell cores over CDR.
 
 :func:`run_loopback` runs a :class:`~pneu_control.experiment.runner.RunSpec` exactly as
 ``ros2 launch pneu_sim sim.launch.py mode:=lockstep`` does, minus the
-middleware: the sim node's :class:`pneu_sim.cycle.rig_cycle.RigCycle` publishes
-each sample as the five sensor messages, every message is CDR-serialised
-and deserialised with rosbags' Jazzy typestore (the bytes rclpy puts on the
-wire), each active controller's :class:`~pneu_control.nodes.controller_core.ControllerShellCore`
-rebuilds the sample, computes and answers with a valve command stamped with
-the sample's stamp, and the sim core advances when every active axis has
-answered. What is recorded is what the logger would see on the topics.
+middleware: the sim node's :class:`pneu_sim.cycle.rig_cycle.RigCycle`
+publishes each sample as the five sensor payloads of
+:class:`pneu_msgs_py.contract.wire.SensorWire` (the bytes the sim node puts on
+the wire), each active controller's
+:class:`~pneu_control.nodes.controller_core.ControllerShellCore` takes the
+payloads of its input topics, rebuilds the sample, computes and answers with
+a valve command stamped with the sample's stamp, and the cycle advances when
+every active axis has answered. The controller states are read back with
+rosbags' Jazzy typestore (an independent decoder). What is recorded is what
+the logger would see on the topics (``tap``).
 
 Same spec and seed -> the in-process runner's numbers (tested); a ROS
 lockstep run adds only transport, so it must give them too (the rclpy test
@@ -23,7 +26,6 @@ from typing import Any
 
 import numpy as np
 from pneu_msgs_py.contract.convert import (
-    command_from_msg,
     controller_state_from_msg,
     fill_diagnostic_array,
     typestore_messages,
@@ -32,10 +34,12 @@ from pneu_msgs_py.contract.topics import (
     CLOCK_TOPIC,
     CONTROLLER_STATE_TOPIC,
     DIAGNOSTICS_TOPIC,
+    TOPIC_BY_NAME,
     VALVE_COMMAND_TOPIC,
 )
+from pneu_msgs_py.contract.wire import CommandWire, SensorWire, clock_bytes
 from pneu_sim.cycle.rig_cycle import RigCycle
-from pneu_sim.nodes.sim_core import fill_sample_messages, safety_statuses
+from pneu_sim.nodes.sim_core import safety_statuses
 from pneu_sim.physics.plant import Plant
 
 from pneu_control.analysis.metrics import WindowSpec
@@ -47,58 +51,29 @@ from pneu_control.experiment.runner import (
     axis_metrics,
     fault_intervals_of,
 )
-from pneu_control.nodes.controller_core import (
-    SENSOR_TOPICS,
-    ControllerShellCore,
-    _new,
-    new_sensor_messages,
-)
+from pneu_control.nodes.controller_core import ControllerShellCore
 
-__all__ = ["CdrWire", "run_loopback"]
+__all__ = ["run_loopback"]
 
 _MEASURED = {"linear": "x", "rotary": "omega"}
-
-
-class CdrWire:
-    """Serialise with rosbags' CDR and deserialise again, as the middleware would.
-
-    ``tap(topic, ros_type, data)`` sees every message's bytes (a logger's view).
-    """
-
-    def __init__(self, tap: Callable[[str, str, bytes], None] | None = None) -> None:
-        self.ts = typestore_messages()
-        self.bytes = 0
-        self.messages = 0
-        self.tap = tap
-
-    def send(self, topic: str, msg: Any, ros_type: str) -> Any:
-        for arr in ("position", "velocity", "effort"):  # rosbags wants numpy float64 arrays
-            if hasattr(msg, arr) and not isinstance(getattr(msg, arr), np.ndarray):
-                setattr(msg, arr, np.asarray(getattr(msg, arr), dtype=np.float64))
-        data = bytes(self.ts.serialize_cdr(msg, ros_type))
-        self.bytes += len(data)
-        self.messages += 1
-        if self.tap is not None:
-            self.tap(topic, ros_type, data)
-        return self.ts.deserialize_cdr(data, ros_type)
-
-
 _DIAG = "diagnostic_msgs/msg/DiagnosticArray"
 
 
-def _diag_msg(types: Any, stamp_ns: int, events: list[Any]) -> Any:
-    """The DiagnosticArray the sim node publishes for supervisor transitions (rosbags classes)."""
+def _diag_bytes(ts: Any, stamp_ns: int, events: list[Any]) -> bytes:
+    """The DiagnosticArray the sim node publishes for supervisor transitions, as CDR."""
+    types = ts.types
     Time, Header = types["builtin_interfaces/msg/Time"], types["std_msgs/msg/Header"]
     msg = types[_DIAG](header=Header(stamp=Time(sec=0, nanosec=0), frame_id=""), status=[])
     status = types["diagnostic_msgs/msg/DiagnosticStatus"]
     kv = types["diagnostic_msgs/msg/KeyValue"]
-    return fill_diagnostic_array(
+    fill_diagnostic_array(
         msg,
         lambda: status(level=0, name="", message="", hardware_id="", values=[]),
         lambda: kv(key="", value=""),
         stamp_ns,
         safety_statuses("pneu_sim", events),
     )
+    return bytes(ts.serialize_cdr(msg, _DIAG))
 
 
 def run_loopback(
@@ -118,8 +93,16 @@ def run_loopback(
     ros_type, data)`` receives every message as published, in publication
     order, ``/clock`` included (e.g. a :class:`LoggerCore`).
     """
-    wire = CdrWire(tap)
-    types = wire.ts.types
+    ts = typestore_messages()
+    messages = [0, 0]  # count, bytes
+
+    def send(topic: str, data: bytes) -> bytes:
+        messages[0] += 1
+        messages[1] += len(data)
+        if tap is not None:
+            tap(topic, TOPIC_BY_NAME[topic].ros_type, data)
+        return data
+
     plant = Plant(spec.plant, seed=spec.seed)
     if supervisor is None and spec.safety is not None:
         from pneu_driver.safety import SafetySupervisor
@@ -134,12 +117,9 @@ def run_loopback(
         seed=spec.seed,
     )
     shells = {axis: ControllerShellCore(axis, spec.controllers[axis]) for axis in spec.axes}
+    commands = {axis: CommandWire(axis) for axis in spec.axes}
+    sensors = SensorWire()
     n = int(round(spec.duration_s / plant.T))
-    ptype = {
-        t: ("sensor_msgs/msg/FluidPressure" if "pressure" in t else "sensor_msgs/msg/JointState")
-        for t in SENSOR_TOPICS
-    }
-    js = "sensor_msgs/msg/JointState"
     drain = getattr(supervisor, "events", None)
 
     rec_samples = []
@@ -149,34 +129,31 @@ def run_loopback(
     events_all: list[Any] = []
     algorithms: dict[str, str] = {}
     t_wall = time.perf_counter()
-    Time = types["builtin_interfaces/msg/Time"]
-    ClockMsg = types["rosgraph_msgs/msg/Clock"]
     s = core.reset()
     for _ in range(n):
         if tap is not None:  # /clock first, as the sim node publishes it (nobody here reads it)
-            sec, nsec = divmod(s.stamp_ns, 1_000_000_000)
-            wire.send(
-                CLOCK_TOPIC, ClockMsg(clock=Time(sec=sec, nanosec=nsec)), "rosgraph_msgs/msg/Clock"
-            )
-        out = new_sensor_messages(types)
-        fill_sample_messages(out, s)
-        wired = {topic: wire.send(topic, out[topic], ptype[topic]) for topic in SENSOR_TOPICS}
+            send(CLOCK_TOPIC, clock_bytes(s.stamp_ns))
+        wired = [(topic, send(topic, data)) for topic, data in sensors.encode(s)]
         for axis, shell in shells.items():
-            cmd, state = _new(types, js), _new(types, js)
-            for topic in SENSOR_TOPICS:  # one publication order; the assembler copes with any
-                if shell.step(topic, wired[topic], cmd, state):
-                    got_cmd = wire.send(VALVE_COMMAND_TOPIC[axis], cmd, js)
-                    got_state = wire.send(CONTROLLER_STATE_TOPIC[axis], state, js)
-                    stamp, u = command_from_msg(got_cmd, axis)
-                    status = core.offer(axis, stamp, u)
-                    if status not in ("accepted", "silent", "invalid"):
-                        raise RuntimeError(f"{axis}: answer to {stamp} ns {status}")
-                    st_stamp, alg, values = controller_state_from_msg(got_state)
-                    if st_stamp != stamp:
-                        raise RuntimeError(f"{axis}: state stamped {st_stamp}, command {stamp}")
-                    rec_state[axis].append(tuple(values[f] for f in STATE_FIELDS))
-                    rec_u[axis].append(u)
-                    algorithms[axis] = alg
+            for topic, data in wired:  # one publication order; the assembler copes with any
+                if topic not in shell.topics:
+                    continue
+                out = shell.step_raw(topic, data)
+                if out is None:
+                    continue
+                stamp, u = commands[axis].decode(send(VALVE_COMMAND_TOPIC[axis], out[0]))
+                status = core.offer(axis, stamp, u)
+                if status not in ("accepted", "silent", "invalid"):
+                    raise RuntimeError(f"{axis}: answer to {stamp} ns {status}")
+                state = ts.deserialize_cdr(
+                    send(CONTROLLER_STATE_TOPIC[axis], out[1]), "sensor_msgs/msg/JointState"
+                )
+                st_stamp, alg, values = controller_state_from_msg(state)
+                if st_stamp != stamp:
+                    raise RuntimeError(f"{axis}: state stamped {st_stamp}, command {stamp}")
+                rec_state[axis].append(tuple(values[f] for f in STATE_FIELDS))
+                rec_u[axis].append(u)
+                algorithms[axis] = alg
         rec_samples.append(s)
         if not core.complete:
             raise RuntimeError(f"lockstep: no answer from {core.waiting_for} to sample {s.k}")
@@ -184,9 +161,8 @@ def run_loopback(
             events = drain()
             events_all.extend(events)
             if events and tap is not None:  # the sim node's /diagnostics for them
-                wire.send(DIAGNOSTICS_TOPIC, _diag_msg(types, s.stamp_ns, events), _DIAG)
-        held = core.held
-        rec_out.append((held["linear"], held["rotary"]))
+                send(DIAGNOSTICS_TOPIC, _diag_bytes(ts, s.stamp_ns, events))
+        rec_out.append(core.held_pair)
         s = core.advance()
     wall = time.perf_counter() - t_wall
 
@@ -228,5 +204,5 @@ def run_loopback(
         fault_intervals=intervals,
         safety_counters=dict(getattr(supervisor, "counters", {}) or {}),
     )
-    result.wire = {"messages": wire.messages, "bytes": wire.bytes, **core.counters()}  # type: ignore[attr-defined]
+    result.wire = {"messages": messages[0], "bytes": messages[1], **core.counters()}  # type: ignore[attr-defined]
     return result

@@ -18,23 +18,17 @@ import sys
 import threading
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from pneu_msgs_py.contract.convert import (
-    DiagStatus,
-    command_from_msg,
-    fill_diagnostic_array,
-    fill_fluid_pressure,
-    fill_joint_state,
-    sample_to_values,
-)
-from pneu_msgs_py.contract.qos import COMMAND_SUB_REALTIME, DIAGNOSTICS, to_rclpy
+from pneu_msgs_py.contract.convert import DiagStatus, fill_diagnostic_array
+from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
 from pneu_msgs_py.contract.samples import AXES
 from pneu_msgs_py.contract.topics import (
     DIAGNOSTICS_TOPIC,
-    JOINT_STATE_TOPIC,
     PRESSURE_TOPICS,
     VALVE_COMMAND_TOPIC,
     qos_for,
+    sub_qos_for,
 )
+from pneu_msgs_py.contract.wire import SENSOR_TOPICS, CommandWire, SensorWire
 from pneu_msgs_py.nodes.run import ShellDefaults, run_node
 from pneu_msgs_py.params.core import ParamError
 from rcl_interfaces.msg import ParameterDescriptor
@@ -50,13 +44,18 @@ from pneu_driver.daq.rig import load_rig_params
 from pneu_driver.loop.driver_loop import DriverLoop
 from pneu_driver.safety import load_safety_params
 
-SENSOR_TOPICS = (*PRESSURE_TOPICS, JOINT_STATE_TOPIC["linear"], JOINT_STATE_TOPIC["rotary"])
 _LEVEL = {"OK": 0, "WARN": 1, "ERROR": 2}
 
 
 class DriverNode(ShellDefaults, Node):
-    def __init__(self, **node_kwargs):
+    """``hosted=True``: the one-process deployment; no command subscriptions, and the manager
+    sets :attr:`hosts` (``axis``, ``compute(sample) -> u``) before :meth:`start`: the loop
+    thread calls them with each sample."""
+
+    def __init__(self, hosted: bool = False, **node_kwargs):
         super().__init__("pneu_driver", **node_kwargs)
+        self.hosts: tuple = ()
+        self.crashed: dict[str, str] = {}
         ro = {"read_only": True}
         self.declare_parameter(
             "rig_file",
@@ -95,11 +94,14 @@ class DriverNode(ShellDefaults, Node):
             raise DaqUnavailableError(rig.device, seen)
         from pneu_driver.safety import SafetySupervisor
 
-        self.msgs = {
-            t: FluidPressure() if t in PRESSURE_TOPICS else JointState() for t in SENSOR_TOPICS
-        }
+        self.wire = SensorWire()
+        self.cmd_wire = {a: CommandWire(a) for a in AXES}
         self.pubs = {
-            t: self.create_publisher(type(self.msgs[t]), t, to_rclpy(qos_for(t, "realtime"), rq))
+            t: self.create_publisher(
+                FluidPressure if t in PRESSURE_TOPICS else JointState,
+                t,
+                to_rclpy(qos_for(t, "realtime"), rq),
+            )
             for t in SENSOR_TOPICS
         }
         self.diag_pub = self.create_publisher(
@@ -114,12 +116,13 @@ class DriverNode(ShellDefaults, Node):
             expected_axes=choices[axes],
             epoch_ns=self.get_clock().now().nanoseconds + rig.period_ns,  # stamps on the ROS clock
         )
-        for a in AXES:
+        for a in () if hosted else AXES:
             self.create_subscription(
                 JointState,
                 VALVE_COMMAND_TOPIC[a],
-                lambda m, a=a: self._on_command(m, a),
-                to_rclpy(COMMAND_SUB_REALTIME, rq),
+                lambda data, a=a: self._on_command(data, a),  # raw bytes, one argument
+                to_rclpy(sub_qos_for(VALVE_COMMAND_TOPIC[a], "realtime"), rq),
+                raw=True,
             )
         self.create_service(Trigger, "~/estop", self._on_estop)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -153,13 +156,19 @@ class DriverNode(ShellDefaults, Node):
             self.stamp_offset_ns is None
         ):  # ROS clock at the first sample vs its stamp (epoch estimate)
             self.stamp_offset_ns = self.get_clock().now().nanoseconds - s.stamp_ns
-        for topic, (frame, names, pos, vel) in sample_to_values(s).items():
-            m = self.msgs[topic]
-            if topic in PRESSURE_TOPICS:
-                fill_fluid_pressure(m, s.stamp_ns, pos[0], frame)
-            else:
-                fill_joint_state(m, s.stamp_ns, names, pos, vel)
-            self.pubs[topic].publish(m)
+        pubs = self.pubs
+        for topic, data in self.wire.encode(s):
+            pubs[topic].publish(data)
+        for h in self.hosts:  # one-process deployment: the controllers answer at once
+            if h.axis in self.crashed:
+                continue
+            try:
+                u = h.compute(s)
+            except Exception as err:  # a crashed controller falls silent: the watchdog acts
+                self.crashed[h.axis] = f"{type(err).__name__}: {err}"
+                self.get_logger().error(f"{h.axis} controller raised {self.crashed[h.axis]}")
+                continue
+            self.loop.put_command(h.axis, u, s.stamp_ns)
 
     def _queue_events(self, events) -> None:
         self.events.extend(events)  # published from the executor thread (one publisher, one thread)
@@ -182,9 +191,9 @@ class DriverNode(ShellDefaults, Node):
         for stamp, statuses in by_stamp.items():
             self._publish(statuses, stamp)
 
-    def _on_command(self, msg: JointState, axis: str) -> None:
+    def _on_command(self, data: bytes, axis: str) -> None:
         try:
-            stamp_ns, u = command_from_msg(msg, axis)
+            stamp_ns, u = self.cmd_wire[axis].decode(data)
         except ValueError as err:
             self.get_logger().warning(
                 f"{axis} valve command ignored: {err}", throttle_duration_sec=1.0

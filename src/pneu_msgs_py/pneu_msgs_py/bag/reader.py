@@ -52,6 +52,7 @@ from pneu_msgs_py.bag.run_data import RunData, TopicArrays
 from pneu_msgs_py.contract.qos import QosProfile, parse_offered_qos_yaml
 
 __all__ = [
+    "SIDECAR",
     "RunData",
     "TopicArrays",
     "read_run",
@@ -62,12 +63,24 @@ __all__ = [
 ]
 
 KNOWN_TYPES = (*FIXED_TYPES, "diagnostic_msgs/msg/DiagnosticArray")
+#: The run metadata a ROS run recorded by ``ros2 bag record`` carries beside its files:
+#: ``{record name: {key: value}}`` as JSON, written by the logger node into the bag directory.
+SIDECAR = "pneu_metadata.json"
 
 
 def bag_files(path: str | os.PathLike) -> tuple[list[Path], list[str]]:
-    """The MCAP files of a path: itself, or a rosbag2 directory's ``relative_file_paths``."""
+    """The MCAP files of a path: itself, or a rosbag2 directory's ``relative_file_paths``.
+
+    A run directory (``out`` of a launch or of ``pneu run``) stands for its bag:
+    ``run.mcap``, or the rosbag2 directory ``bag``.
+    """
     p = Path(path)
     warn: list[str] = []
+    if p.is_dir() and not (p / "metadata.yaml").is_file():
+        if (p / "run.mcap").is_file():
+            return [p / "run.mcap"], warn
+        if (p / "bag" / "metadata.yaml").is_file():
+            p = p / "bag"
     if p.is_dir():
         meta = p / "metadata.yaml"
         if meta.is_file():
@@ -194,6 +207,29 @@ def _file_chunks(path: Path, ctx: _Ctx) -> Iterator[list[tuple[str, list[Piece]]
             ctx.truncated.append(str(path))
 
 
+def _merge_sidecar(files: list[Path], ctx: _Ctx) -> None:
+    """Metadata records of the :data:`SIDECAR` beside the files (a ros2 bag record run)."""
+    side = files[0].parent / SIDECAR if files else None
+    if side is None or not side.is_file():
+        return
+    import json
+
+    try:
+        records = json.loads(side.read_text(encoding="utf-8"))
+        ok = isinstance(records, dict) and all(
+            isinstance(r, dict) and all(isinstance(v, str) for v in r.values())
+            for r in records.values()
+        )
+    except (OSError, ValueError) as err:
+        ctx.warn.append(f"{side}: unreadable run metadata ({err}); ignored")
+        return
+    if not ok:
+        ctx.warn.append(f"{side}: not {{record: {{key: str}}}} JSON; ignored")
+        return
+    for name, rec in records.items():
+        ctx.metadata.setdefault(name, rec)
+
+
 def _finish(path, ctx: _Ctx, collectors: dict[str, Collector], strict: bool) -> RunData:
     if strict and ctx.truncated:
         raise TruncatedBagError(ctx.truncated[0], "file is truncated (strict mode)")
@@ -275,6 +311,7 @@ def read_run(
         for topic, (ros_type, qos, _cap) in ctx.topics.items():
             if topic not in collectors:  # a channel without messages
                 collectors[topic] = Collector(topic, ros_type, qos, 0)
+    _merge_sidecar(files, ctx)
     data = _finish(path, ctx, collectors, strict)
     if data.message_count == 0:
         if ctx.truncated:
@@ -314,6 +351,7 @@ def iter_run(
                 pending = RunData({}, _build_all(collectors), [], str(path))
                 total += pending.message_count
                 collectors = {}
+    _merge_sidecar(files, ctx)
     last = _finish(path, ctx, collectors, strict)
     total += last.message_count
     if pending is not None:

@@ -3,8 +3,13 @@
 Two run modes:
 
 ``realtime`` (the rig, or the twin paced by the wall clock)
-    Sensors use the sensor-data profile (best effort, keep last 5, volatile):
-    a late sample is useless, a retransmission would only delay the next one.
+    Sensors: the publisher offers reliable, keep last 100; the controllers
+    subscribe with the sensor-data profile (best effort, keep last 5): a late
+    sample is useless to them, a retransmission would only delay the next
+    one, while the recorder subscribes reliable and gets every sample even
+    when the machine is busy (measured: a best-effort recorder lost samples
+    on a loaded 2-core machine). Keep last 100 is the recorder's slack: a
+    reliable writer with keep-last history never blocks the loop.
     Valve commands: the publisher offers reliable, keep last 1; the driver
     subscribes best effort, keep last 1. A reliable publisher is compatible
     with both best-effort and reliable subscriptions (the reverse is not:
@@ -40,6 +45,7 @@ __all__ = [
     "QosProfile",
     "DURATION_INFINITE",
     "SENSOR_DATA",
+    "SENSOR_PUB",
     "LOCKSTEP",
     "COMMAND_PUB",
     "COMMAND_SUB_REALTIME",
@@ -128,6 +134,7 @@ class QosProfile:
 
 
 SENSOR_DATA = QosProfile(history="keep_last", depth=5, reliability="best_effort")
+SENSOR_PUB = QosProfile(history="keep_last", depth=100, reliability="reliable")
 LOCKSTEP = QosProfile(history="keep_last", depth=1000, reliability="reliable")
 COMMAND_PUB = QosProfile(history="keep_last", depth=1, reliability="reliable")
 COMMAND_SUB_REALTIME = QosProfile(history="keep_last", depth=1, reliability="best_effort")

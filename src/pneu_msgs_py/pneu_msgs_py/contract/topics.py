@@ -46,6 +46,7 @@ __all__ = [
     "ROTARY_COUNTS_JOINT",
     "valve_joint",
     "qos_for",
+    "sub_qos_for",
     "markdown_table",
 ]
 
@@ -121,7 +122,7 @@ TOPICS: tuple[TopicSpec, ...] = (
             "controllers, logger",
             f"{frame.replace('_', ' ')} pressure; header.frame_id = {frame!r}, "
             "variance = sensor noise variance [Pa^2] or 0",
-            _q.SENSOR_DATA,
+            _q.SENSOR_PUB,
             _q.LOCKSTEP,
             "pressure",
         )
@@ -135,7 +136,7 @@ TOPICS: tuple[TopicSpec, ...] = (
         "driver / sim",
         "linear controller, logger",
         "name ['linear'], position [x] (0 = mid-stroke, + = extending); velocity, effort empty",
-        _q.SENSOR_DATA,
+        _q.SENSOR_PUB,
         _q.LOCKSTEP,
         "joint_state",
         "linear",
@@ -149,7 +150,7 @@ TOPICS: tuple[TopicSpec, ...] = (
         "rotary controller, logger",
         "name ['rotary', 'rotary_counts'], position [theta, encoder count as float64], "
         "velocity [omega from counts per period, NaN]; effort empty",
-        _q.SENSOR_DATA,
+        _q.SENSOR_PUB,
         _q.LOCKSTEP,
         "joint_state",
         "rotary",
@@ -227,6 +228,24 @@ def qos_for(topic: str, mode: str) -> _q.QosProfile:
     if spec is None:
         return _q.QosProfile()  # rclpy default (reliable, keep last 10, volatile)
     return spec.qos_lockstep if mode == "lockstep" else spec.qos_realtime
+
+
+def sub_qos_for(topic: str, mode: str) -> _q.QosProfile:
+    """Subscription QoS of the graph's own consumers (controllers, sim, driver) in ``mode``.
+
+    Realtime: sensors best effort, keep last 5 (a late sample is useless to a
+    controller), valve commands best effort, keep last 1 (the driver's
+    watchdog answers a lost one); both compatible with the reliable
+    publishers, so recorders can still ask for reliable delivery. Otherwise
+    the publisher's profile.
+    """
+    spec = TOPIC_BY_NAME.get(topic)
+    if mode == "realtime" and spec is not None:
+        if spec.kind in ("pressure", "joint_state"):
+            return _q.SENSOR_DATA
+        if spec.kind == "valve_command":
+            return _q.COMMAND_SUB_REALTIME
+    return qos_for(topic, mode)
 
 
 def markdown_table() -> str:

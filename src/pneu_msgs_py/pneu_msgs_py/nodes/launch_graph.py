@@ -1,10 +1,20 @@
-"""What ``sim.launch.py`` and ``rig.launch.py`` share: arguments, controllers and the logger.
+"""What ``sim.launch.py`` and ``rig.launch.py`` share: arguments, controllers and recording.
 
 The two launch files differ only in what drives the rig (the sim node or
-the driver node). Everything downstream of the sensor topics -- one
-controller node per active axis (``pneu_control``'s executables, named
-here as strings so that neither pneu_sim nor pneu_driver imports
-pneu_control, DESIGN §2) and the logger -- is built here once.
+the driver node). Everything else is built here once (``pneu_control``'s
+executables are named as strings, so that neither pneu_sim nor pneu_driver
+imports pneu_control, DESIGN §2):
+
+- ``deployment:=nodes`` -- one controller node per active axis, separate
+  processes talking over topics; ``deployment:=hosted`` -- the hard-1 kHz
+  deployment: ``pneu_control controller_manager`` runs the sim's or the
+  driver's loop and the controller cores in one process (the nodes keep
+  their names, parameters and topics);
+- recording: ``recorder:=rosbag2`` (``ros2 bag record -s mcap`` with QoS
+  overrides from the topic table, into ``<out>/bag``; the logger node adds the
+  run metadata beside it) or ``recorder:=pneu`` (the logger node writes
+  ``<out>/run.mcap`` itself); ``auto`` = pneu in lockstep, rosbag2 in realtime;
+- ``executor:=events|single|auto`` for every node (default: each node's own).
 """
 
 from __future__ import annotations
@@ -17,7 +27,13 @@ from pneu_msgs_py.params.spec import parse_spec
 __all__ = [
     "AXES_OF",
     "GAIN_FILES",
+    "common_parameters",
     "controller_and_logger_nodes",
+    "controller_overrides",
+    "hosted_manager",
+    "recorder_choice",
+    "rosbag2_qos_overrides",
+    "rosbag2_recorder",
     "launch_arguments",
     "launch_description",
     "reference_overrides",
@@ -31,6 +47,32 @@ ALGORITHM_CHOICES = ["", "pid", "ladrc", "eso_smc", "eso_smc_plus"]
 def launch_arguments(gains_default: str, gains_why: str) -> list[tuple[str, str, str, list | None]]:
     """(name, default, description, choices) of the arguments both launch files take."""
     return [
+        (
+            "deployment",
+            "nodes",
+            "nodes: a process per controller, over topics; hosted: the controllers run inside "
+            "the 1 kHz loop's process (hard real time, like ros2_control's controller manager)",
+            ["nodes", "hosted"],
+        ),
+        (
+            "recorder",
+            "auto",
+            "rosbag2: ros2 bag record into <out>/bag (+ run metadata); pneu: the logger node "
+            "writes <out>/run.mcap; auto: pneu in lockstep, rosbag2 in realtime",
+            ["auto", "pneu", "rosbag2"],
+        ),
+        (
+            "executor",
+            "",
+            "rclpy executor of every node: events, single or auto ('' = each node's default)",
+            ["", "events", "single", "auto"],
+        ),
+        (
+            "state_rate_hz",
+            "0",
+            "controller_state rate (0 = every tick in lockstep, 100 Hz in realtime)",
+            None,
+        ),
         (
             "controller",
             "",
@@ -73,39 +115,163 @@ def reference_overrides(text: str, field: str = "reference") -> dict[str, Any]:
     return out
 
 
+def common_parameters(arg: dict[str, str]) -> dict[str, Any]:
+    """Parameters every node of the graph takes from the launch arguments."""
+    return {"executor": arg["executor"]} if arg["executor"] else {}
+
+
+def controller_overrides(arg: dict[str, str], axis: str, mode: str) -> dict[str, Any]:
+    """A controller node's parameters from the launch arguments (on top of the gain file)."""
+    over: dict[str, Any] = {
+        "mode": mode,
+        "use_sim_time": mode == "lockstep",
+        "state_rate_hz": float(arg["state_rate_hz"]),
+        **common_parameters(arg),
+    }
+    if arg["controller"]:
+        over["algorithm"] = arg["controller"]
+    over.update(reference_overrides(arg["reference"]))
+    over.update(reference_overrides(arg[f"{axis}_reference"], f"{axis}_reference"))
+    return over
+
+
+def recorder_choice(arg: dict[str, str], mode: str) -> str:
+    """pneu or rosbag2 (``auto``: pneu in lockstep, rosbag2 in realtime)."""
+    choice = arg["recorder"]
+    if choice == "auto":
+        return "pneu" if mode == "lockstep" else "rosbag2"
+    return choice
+
+
 def controller_and_logger_nodes(
     arg: dict[str, str], config_dir: str, *, mode: str, out: str
 ) -> list[Any]:
-    """One controller node per active axis (``arg["axes"]``) and the logger."""
+    """One controller node per active axis (``deployment:=nodes``), the recorder and the logger."""
+    import os
+
     from launch_ros.actions import Node
 
-    lockstep = mode == "lockstep"
+    recorder = recorder_choice(arg, mode)
+    bag = os.path.join(out, "bag" if recorder == "rosbag2" else "run.mcap")
+    if os.path.exists(bag):  # a run is never overwritten
+        raise RuntimeError(f"out: {bag} exists; choose another out:= for this run")
     nodes = []
-    for axis in AXES_OF[arg["axes"]]:
-        over: dict[str, Any] = {"mode": mode, "use_sim_time": lockstep}
-        if arg["controller"]:
-            over["algorithm"] = arg["controller"]
-        over.update(reference_overrides(arg["reference"]))
-        over.update(reference_overrides(arg[f"{axis}_reference"], f"{axis}_reference"))
-        nodes.append(
-            Node(
-                package="pneu_control",
-                executable=f"{axis}_controller",
-                name=f"{axis}_controller",
-                output="screen",
-                parameters=[f"{config_dir}/{GAIN_FILES[arg['gains']]}", over],
+    if arg["deployment"] == "nodes":
+        for axis in AXES_OF[arg["axes"]]:
+            nodes.append(
+                Node(
+                    package="pneu_control",
+                    executable=f"{axis}_controller",
+                    name=f"{axis}_controller",
+                    output="screen",
+                    parameters=[
+                        f"{config_dir}/{GAIN_FILES[arg['gains']]}",
+                        controller_overrides(arg, axis, mode),
+                    ],
+                )
             )
-        )
+    if recorder == "rosbag2":
+        nodes.append(rosbag2_recorder(out, mode))
     nodes.append(
         Node(
             package="pneu_control",
             executable="logger",
             name="logger",
             output="screen",
-            parameters=[{"out": out, "mode": mode, "use_sim_time": lockstep}],
+            parameters=[
+                {
+                    "out": out,
+                    "mode": mode,
+                    "use_sim_time": mode == "lockstep",
+                    "recorder": recorder,
+                    "bag_name": "bag" if recorder == "rosbag2" else "run.mcap",
+                    **common_parameters(arg),
+                }
+            ],
+            sigterm_timeout="15",  # the run's metadata is written at shutdown
         )
     )
     return nodes
+
+
+def hosted_manager(
+    arg: dict[str, str],
+    config_dir: str,
+    backend: str,
+    host_node: str,
+    host_params: dict,
+    **node_kwargs: Any,
+) -> Any:
+    """``deployment:=hosted``: the controller manager process (loop + controllers).
+
+    Parameters go to each node of that process by name, in a params file
+    written next to nothing else: ``<host_node>``, ``linear_controller``,
+    ``rotary_controller`` sections on top of the gain file.
+    """
+    import tempfile
+
+    import yaml
+    from launch_ros.actions import Node
+
+    doc = {
+        "controller_manager": {"ros__parameters": {"backend": backend}},
+        host_node: {"ros__parameters": {**host_params, **common_parameters(arg)}},
+    }
+    for axis in AXES_OF[arg["axes"]]:
+        doc[f"{axis}_controller"] = {"ros__parameters": controller_overrides(arg, axis, "realtime")}
+    fd, path = tempfile.mkstemp(prefix="pneu_hosted_", suffix=".yaml")
+    with open(fd, "w", encoding="utf-8") as fh:
+        yaml.safe_dump(doc, fh)
+    return Node(
+        package="pneu_control",
+        executable="controller_manager",
+        output="screen",
+        parameters=[f"{config_dir}/{GAIN_FILES[arg['gains']]}", path],
+        **node_kwargs,
+    )
+
+
+def rosbag2_qos_overrides(mode: str) -> dict[str, dict[str, Any]]:
+    """``--qos-profile-overrides-path`` content: each pneu topic with the QoS it is offered
+    (a recorder that subscribes before the publishers exist would otherwise pick rosbag2's
+    default, reliable, which a best-effort sensor publisher cannot serve)."""
+    from pneu_msgs_py.contract.topics import TOPICS, qos_for
+
+    out = {}
+    for t in TOPICS:
+        q = qos_for(t.name, mode)
+        out[t.name] = {
+            "history": q.history,
+            "depth": max(q.depth, 100),  # the recorder's queue: room for a scheduling hiccup
+            "reliability": q.reliability,
+            "durability": q.durability,
+        }
+    return out
+
+
+def rosbag2_recorder(out: str, mode: str) -> Any:
+    """``ros2 bag record -s mcap`` of every pneu topic into ``<out>/bag``."""
+    import os
+
+    import yaml
+    from launch.actions import ExecuteProcess
+
+    from pneu_msgs_py.contract.topics import TOPICS
+
+    os.makedirs(out, exist_ok=True)
+    qos_file = os.path.join(out, "recorder_qos.yaml")
+    with open(qos_file, "w", encoding="utf-8") as fh:
+        yaml.safe_dump(rosbag2_qos_overrides(mode), fh)
+    cmd = ["ros2", "bag", "record", "-s", "mcap", "-o", os.path.join(out, "bag")]
+    cmd += ["--qos-profile-overrides-path", qos_file, "--max-cache-size", str(64 << 20)]
+    cmd += ["--disable-keyboard-controls", "--topics", *(t.name for t in TOPICS)]
+    return ExecuteProcess(
+        cmd=cmd,
+        name="recorder",
+        output="screen",
+        sigterm_timeout="20",  # flush the cache and write the summary before any SIGKILL
+        sigkill_timeout="10",
+    )
 
 
 def launch_description(

@@ -1,10 +1,10 @@
 """The sim node's core without ROS: its parameters, messages, faults and diagnostics.
 
 The cycle itself is :class:`pneu_sim.cycle.rig_cycle.RigCycle` (the one the
-in-process runner steps); the node publishes each sample with
-:func:`fill_sample_messages`, offers the controllers' answers to the cycle
-and advances it (lockstep: when every active axis answered; realtime: on a
-1 kHz wall-clock tick).
+in-process runner steps); the node publishes each sample as raw CDR
+(:class:`pneu_msgs_py.contract.wire.SensorWire`), offers the controllers'
+answers to the cycle and advances it -- lockstep: when every active axis
+answered; realtime: on a 1 kHz wall-clock tick of :class:`SimLoop`.
 """
 
 from __future__ import annotations
@@ -13,41 +13,23 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from pneu_msgs_py.contract.convert import fill_fluid_pressure, fill_joint_state, sample_to_values
-from pneu_msgs_py.contract.samples import AXES, SensorSample
-from pneu_msgs_py.contract.topics import PRESSURE_TOPICS
+from pneu_msgs_py.contract.samples import AXES
 from pneu_msgs_py.params.core import ParamError, param
 
 __all__ = [
     "MODES",
     "SimNodeParams",
     "active_axes",
-    "fill_sample_messages",
     "load_faults",
     "safety_statuses",
+    "SimLoop",
+    "RealtimeParams",
+    "StartupParams",
 ]
 
 from pneu_sim.cycle.rig_cycle import MODES
 
 AXES_CHOICES = ("linear", "rotary", "both", "none")
-
-
-def fill_sample_messages(
-    msgs: Mapping[str, Any], s: SensorSample, variances: Mapping[str, float] | None = None
-) -> None:
-    """Fill the five sensor messages of sample ``s`` in place (``{topic: message}``).
-
-    Pressures: FluidPressure (Pa abs, ``variance`` in Pa^2 per topic if given);
-    joint states: JointState as :func:`pneu_msgs_py.contract.convert.sample_to_values`
-    lays them out. All stamped with ``s.stamp_ns``.
-    """
-    for topic, (frame, names, pos, vel) in sample_to_values(s).items():
-        m = msgs[topic]
-        if topic in PRESSURE_TOPICS:
-            var = variances.get(topic, 0.0) if variances else 0.0
-            fill_fluid_pressure(m, s.stamp_ns, pos[0], frame, var)
-        else:
-            fill_joint_state(m, s.stamp_ns, names, pos, vel)
 
 
 def load_faults(text: str = "", path: str = "") -> tuple[Any, ...]:
@@ -110,6 +92,39 @@ class LockstepParams:
         lo_open=True,
         hi=60.0,
     )
+
+
+@dataclass(frozen=True)
+class RealtimeParams:
+    spin_us: float = param(
+        200.0,
+        unit="µs",
+        desc="the loop sleeps until this long before each tick, then spins on the clock",
+        lo=0.0,
+        hi=1000.0,
+        read_only=True,
+    )
+    rt_priority: int = param(
+        0,
+        desc="SCHED_FIFO priority of the loop thread (0 = normal scheduling; needs CAP_SYS_NICE "
+        "or an rtprio limit, else a warning and normal scheduling)",
+        lo=0,
+        hi=99,
+        read_only=True,
+    )
+    switch_interval_us: float = param(
+        500.0,
+        unit="µs",
+        desc="Python's GIL switch interval while the loop runs (sys.setswitchinterval; the "
+        "default 5000 µs lets another thread hold the GIL for 5 ticks; 0 = leave it)",
+        lo=0.0,
+        hi=5000.0,
+        read_only=True,
+    )
+
+
+@dataclass(frozen=True)
+class StartupParams:
     min_subscribers: int = param(
         1,
         desc="before sample 0: wait until every sensor topic has this many matched subscriptions "
@@ -127,7 +142,7 @@ class LockstepParams:
         hi=60.0,
         read_only=True,
     )
-    startup_timeout_s: float = param(
+    timeout_s: float = param(
         30.0,
         unit="s",
         desc="start anyway (with a warning) after waiting this long for subscribers",
@@ -190,3 +205,129 @@ class SimNodeParams:
         read_only=True,
     )
     lockstep: LockstepParams = param(LockstepParams)
+    realtime: RealtimeParams = param(RealtimeParams)
+    startup: StartupParams = param(StartupParams)
+
+
+class SimLoop:
+    """The sim's realtime loop, without ROS: :class:`RigCycle` paced at 1/T in its own thread.
+
+    Per tick k (due at t0 + k·T, :class:`pneu_driver.loop.pacer.Pacer`): the
+    supervisor's transitions of cycle k−1 go to ``on_events``; the cycle
+    advances (the plant steps under u_{k−1}, the newest answers are held) to
+    sample k; ``on_sample(s)`` publishes it -- and in the one-process
+    deployment computes and offers the answers at once. Answers arrive from
+    any thread through :meth:`offer` (a lock guards the cycle); the time from
+    a sample being ready to its answer is recorded per axis (``turnaround``).
+    A tick started a whole period late steps the plant over the missed ticks
+    without publishing them (the controllers miss those, counted). Ends after
+    ``n_end`` samples (0: when stopped).
+    """
+
+    def __init__(
+        self,
+        cycle: Any,
+        *,
+        on_sample: Any,
+        on_events: Any = None,
+        n_end: int = 0,
+        params: RealtimeParams | None = None,
+    ) -> None:
+        import threading
+
+        from pneu_driver.loop.pacer import Pacer, Timing
+
+        self.cycle = cycle
+        self.p = params or RealtimeParams()
+        self.on_sample = on_sample
+        self.on_events = on_events
+        self.n_end = int(n_end)
+        self.pacer = Pacer(round(cycle.period_s * 1e9), spin_us=self.p.spin_us)
+        self.turnaround = {axis: Timing() for axis in cycle.axes}
+        self.lock = threading.Lock()
+        self.stop_event = threading.Event()
+        self.finished = threading.Event()
+        self.error: BaseException | None = None
+        self.notes: list[str] = []
+        self._stamp = -1
+        self._ready_ns = 0
+
+    def offer(self, axis: str, stamp_ns: int, u: float) -> str:
+        """A controller's answer (any thread); see :meth:`RigCycle.offer`."""
+        import time
+
+        now = time.perf_counter_ns()
+        with self.lock:
+            status = self.cycle.offer(axis, stamp_ns, u)
+            if status == "accepted" and stamp_ns == self._stamp:
+                self.turnaround[axis].add(now - self._ready_ns)
+        return status
+
+    def run(self) -> None:
+        """The loop (call in its own thread; :meth:`start` does)."""
+        import sys
+        import time
+
+        from pneu_driver.loop.rt import enable_realtime
+
+        old_switch = sys.getswitchinterval()
+        if self.p.switch_interval_us > 0:
+            sys.setswitchinterval(self.p.switch_interval_us * 1e-6)
+        self.notes, restore = enable_realtime(self.p.rt_priority)
+        cycle, pacer, clock = self.cycle, self.pacer, time.perf_counter_ns
+        try:
+            pacer.start()
+            k = 0
+            while not self.stop_event.is_set():
+                started = pacer.wait(k)
+                with self.lock:
+                    events = []
+                    if k == 0:
+                        s = cycle.reset()
+                    else:
+                        for _ in range(started - k):  # ticks missed entirely: no sample out
+                            events += self._drain()
+                            cycle.advance()
+                        events += self._drain()
+                        s = cycle.advance()
+                    self._stamp = s.stamp_ns
+                    self._ready_ns = clock()
+                if events and self.on_events is not None:
+                    self.on_events(events, s.stamp_ns)
+                self.on_sample(s)
+                k = started + 1
+                if self.n_end and s.k + 1 >= self.n_end:
+                    break
+            with self.lock:
+                events = self._drain()
+            if events and self.on_events is not None:
+                self.on_events(events, cycle.sample.stamp_ns)
+        except BaseException as err:  # reported by the node
+            self.error = err
+        finally:
+            with self.lock:
+                cycle.safe_outputs()
+            restore()
+            sys.setswitchinterval(old_switch)
+            self.finished.set()
+
+    def _drain(self) -> list[Any]:
+        sup = self.cycle.supervisor
+        return sup.events() if sup is not None else []
+
+    def start(self) -> Any:
+        import threading
+
+        th = threading.Thread(target=self.run, name="pneu_sim_loop", daemon=True)
+        th.start()
+        return th
+
+    def stats(self) -> dict[str, str]:
+        """Timing and counters for ``/diagnostics`` and the end-of-run report."""
+        out = {k: str(v) for k, v in self.cycle.counters().items()}
+        out.update(self.pacer.lateness.summary("lateness"))
+        out["skipped_ticks"] = str(self.pacer.skipped)
+        for axis, t in self.turnaround.items():
+            out.update(t.summary(f"turnaround.{axis}"))
+        out["realtime"] = "; ".join(self.notes) or "normal scheduling"
+        return out

@@ -1,12 +1,26 @@
 """``ros2 run pneu_sim sim_node``: the twin on the driver's topics (rclpy shell).
 
-Lockstep: publishes ``/clock`` and sample k (reliable), waits for every active
-controller's valve command stamped with sample k (or ``lockstep.timeout_s``,
-counted), then advances -- :class:`pneu_sim.cycle.rig_cycle.RigCycle` does the
-bookkeeping, with the in-process runner's one-sample delay. Realtime: the
-same core advanced by a 1/T wall-clock timer. ``~/estop`` and ``~/reset``
+One :class:`pneu_sim.cycle.rig_cycle.RigCycle` (plant, injected faults,
+supervisor; the in-process runner's one-sample delay) behind the topics.
+Every sample goes out as five pre-serialised CDR payloads
+(:class:`pneu_msgs_py.contract.wire.SensorWire`), commands come in raw
+(:class:`~pneu_msgs_py.contract.wire.CommandWire`): no message conversion on
+the hot path.
+
+Lockstep: publishes ``/clock`` and sample k (reliable), waits for every
+active controller's valve command stamped with sample k (or
+``lockstep.timeout_s``, counted), then advances -- driven by the command
+callbacks. Realtime: :class:`pneu_sim.nodes.sim_core.SimLoop` paces the
+cycle at 1/T on the wall clock in its own thread and applies the newest
+answer at each tick (a period without one is counted as missed). Both wait
+for their subscribers first (``startup.*``). ``~/estop`` and ``~/reset``
 (std_srvs/Trigger) go to the SafetySupervisor. Exits when ``duration_s`` of
 simulated time has been published.
+
+``hosted=True`` (the one-process deployment, ``pneu_control``'s
+``controller_manager``): no command subscriptions; the manager sets
+:attr:`SimNode.hosts` -- objects with ``axis`` and ``compute(sample) -> u`` --
+before the node starts, and the realtime loop calls them with each sample.
 """
 
 from __future__ import annotations
@@ -16,21 +30,17 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pneu_driver.safety import SafetySupervisor, load_safety_params
-from pneu_msgs_py.contract.convert import (
-    DiagStatus,
-    command_from_msg,
-    fill_diagnostic_array,
-    fill_stamp,
-)
-from pneu_msgs_py.contract.qos import COMMAND_SUB_REALTIME, DIAGNOSTICS, to_rclpy
+from pneu_msgs_py.contract.convert import DiagStatus, fill_diagnostic_array
+from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
 from pneu_msgs_py.contract.topics import (
     CLOCK_TOPIC,
     DIAGNOSTICS_TOPIC,
-    JOINT_STATE_TOPIC,
     PRESSURE_TOPICS,
     VALVE_COMMAND_TOPIC,
     qos_for,
+    sub_qos_for,
 )
+from pneu_msgs_py.contract.wire import SENSOR_TOPICS, CommandWire, SensorWire, clock_bytes
 from pneu_msgs_py.nodes.run import ShellDefaults, run_node
 from pneu_msgs_py.params.core import ParamError, from_dict, with_updates
 from pneu_msgs_py.params.ros import declarations
@@ -49,16 +59,14 @@ from std_srvs.srv import Trigger
 
 from pneu_sim.cycle.rig_cycle import RigCycle
 from pneu_sim.nodes.sim_core import (
+    SimLoop,
     SimNodeParams,
     active_axes,
-    fill_sample_messages,
     load_faults,
     safety_statuses,
 )
 from pneu_sim.physics.plant import Plant
 from pneu_sim.physics.plant_file import load_plant
-
-SENSOR_TOPICS = (*PRESSURE_TOPICS, JOINT_STATE_TOPIC["linear"], JOINT_STATE_TOPIC["rotary"])
 
 
 def declare_from_dataclass(node: Node, params) -> dict:
@@ -69,7 +77,7 @@ def declare_from_dataclass(node: Node, params) -> dict:
 
 
 class SimNode(ShellDefaults, Node):
-    def __init__(self, **node_kwargs):
+    def __init__(self, hosted: bool = False, **node_kwargs):
         super().__init__("pneu_sim", **node_kwargs)
         values = declare_from_dataclass(self, SimNodeParams())
         self.p = with_updates(from_dict(SimNodeParams, {}, strict=False), values)
@@ -80,6 +88,9 @@ class SimNode(ShellDefaults, Node):
             sup = SafetySupervisor(load_safety_params(p.safety_file or None), sample_time_s=plant.T)
         self.supervisor = sup
         self.axes = active_axes(p.axes)
+        self.hosts: tuple = ()  # set by the one-process deployment before start
+        if hosted and p.mode != "realtime":
+            raise ParamError("mode", p.mode, "realtime for the one-process deployment")
         faults = load_faults(p.faults, p.faults_file)
         self.core = RigCycle(
             plant, axes=self.axes, mode=p.mode, x0=p.x0, supervisor=sup, faults=faults, seed=p.seed
@@ -87,33 +98,35 @@ class SimNode(ShellDefaults, Node):
         self.n_end = round(p.duration_s / plant.T) if p.duration_s > 0 else 0
         self.done = Future()
         self.halted = ""  # e-stopped without a supervisor: time stands still
+        self.crashed: dict[str, str] = {}  # hosted controllers that raised
         from rclpy import qos as rq
 
-        self.msgs = {
-            t: FluidPressure() if t in PRESSURE_TOPICS else JointState() for t in SENSOR_TOPICS
-        }
+        self.wire = SensorWire()
+        self.cmd_wire = {a: CommandWire(a) for a in self.axes}
         self.pubs = {
-            t: self.create_publisher(type(self.msgs[t]), t, to_rclpy(qos_for(t, p.mode), rq))
+            t: self.create_publisher(
+                FluidPressure if t in PRESSURE_TOPICS else JointState,
+                t,
+                to_rclpy(qos_for(t, p.mode), rq),
+            )
             for t in SENSOR_TOPICS
         }
         self.lockstep = p.mode == "lockstep"
-        self.clock_msg = ClockMsg()
         self.clock_pub = (
             self.create_publisher(ClockMsg, CLOCK_TOPIC, to_rclpy(qos_for(CLOCK_TOPIC, p.mode), rq))
             if self.lockstep
             else None
         )
-        cmd_qos = to_rclpy(
-            qos_for(VALVE_COMMAND_TOPIC["linear"], "lockstep")
-            if self.lockstep
-            else COMMAND_SUB_REALTIME,
-            rq,
-        )
+        cmd_qos = to_rclpy(sub_qos_for(VALVE_COMMAND_TOPIC["linear"], p.mode), rq)
         self.cmd_subs = [
             self.create_subscription(
-                JointState, VALVE_COMMAND_TOPIC[a], lambda m, a=a: self._on_command(m, a), cmd_qos
+                JointState,
+                VALVE_COMMAND_TOPIC[a],
+                lambda data, a=a: self._on_command(data, a),  # raw bytes, one argument
+                cmd_qos,
+                raw=True,
             )
-            for a in self.axes
+            for a in (() if hosted else self.axes)
         ]
         self.diag_pub = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
@@ -124,20 +137,37 @@ class SimNode(ShellDefaults, Node):
         self.add_post_set_parameters_callback(self._apply)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+        self.loop: SimLoop | None = None
+        if not self.lockstep:
+            self.loop = SimLoop(
+                self.core,
+                on_sample=self._realtime_sample,
+                on_events=self._publish_safety_events,
+                n_end=self.n_end,
+                params=p.realtime,
+            )
         self.started = False
         self.t_ready = None
         self.t_start = self.t_published = time.monotonic()
-        if self.lockstep:
-            self.create_timer(0.05, self._lockstep_watch, clock=steady)
-        else:
-            self.create_timer(plant.T, self._realtime_tick, clock=steady)
+        self.create_timer(0.05, self._watch, clock=steady)
         self.get_logger().info(
-            f"{p.mode} simulation, active axes: {', '.join(self.axes) or 'none'}, "
-            f"duration {p.duration_s:g} s (0 = endless), safety supervisor {'on' if sup else 'off'}"
+            f"{p.mode} simulation, active axes: {', '.join(self.axes) or 'none'}"
+            + (" (controllers hosted in this process)" if hosted else "")
+            + f", duration {p.duration_s:g} s (0 = endless), safety supervisor "
+            + ("on" if sup else "off")
         )
 
     def safe_shutdown(self) -> None:
+        if self.loop is not None:
+            self.loop.stop_event.set()
+            self.loop.finished.wait(timeout=2.0)
         self.core.safe_outputs()  # a real rig would now be at 5 V on both valves
+
+    def exit_code(self) -> int:
+        if self.loop is not None and self.loop.error is not None:
+            print(f"sim_node: error: {self.loop.error}", file=sys.stderr)
+            return 1
+        return 0
 
     # -- parameters --------------------------------------------------------
     def _validate(self, params) -> SetParametersResult:
@@ -155,29 +185,47 @@ class SimNode(ShellDefaults, Node):
         )
 
     # -- the cycle ---------------------------------------------------------
-    def _publish_sample(self) -> None:
-        s = self.core.sample
+    def _publish_sample(self, s) -> None:
         if self.clock_pub is not None:
-            fill_stamp(self.clock_msg.clock, s.stamp_ns)
-            self.clock_pub.publish(self.clock_msg)
-        fill_sample_messages(self.msgs, s)
-        for t in SENSOR_TOPICS:
-            self.pubs[t].publish(self.msgs[t])
+            self.clock_pub.publish(clock_bytes(s.stamp_ns))
+        pubs = self.pubs
+        for topic, data in self.wire.encode(s):
+            pubs[topic].publish(data)
         self.t_published = time.monotonic()
 
+    def _realtime_sample(self, s) -> None:
+        """Realtime loop thread: publish sample k; hosted controllers answer it at once."""
+        self._publish_sample(s)
+        for h in self.hosts:
+            if h.axis in self.crashed:
+                continue
+            try:
+                u = h.compute(s)
+            except Exception as err:  # as the runner: a crashed controller falls silent
+                self.crashed[h.axis] = f"{type(err).__name__}: {err}"
+                self.get_logger().error(
+                    f"{h.axis} controller raised {self.crashed[h.axis]}; no more commands "
+                    "(the supervisor's watchdog takes the axis safe)"
+                )
+                continue
+            self.loop.offer(h.axis, s.stamp_ns, u)
+
     def _advance(self) -> None:
+        """Lockstep: end of cycle k (every answer in, or the timeout) -> sample k+1."""
         if self.halted or self.done.done():
             return
-        self._publish_safety_events()  # end of cycle k, stamped with sample k (the runner's layout)
+        self._publish_safety_events(self._drain(), self.core.sample.stamp_ns)
         if self.n_end and self.core.sample.k + 1 >= self.n_end:
             self._finish()
             return
-        self.core.advance()
-        self._publish_sample()
+        self._publish_sample(self.core.advance())
 
-    def _on_command(self, msg: JointState, axis: str) -> None:
+    def _drain(self):
+        return self.supervisor.events() if self.supervisor is not None else []
+
+    def _on_command(self, data: bytes, axis: str) -> None:
         try:
-            stamp_ns, u = command_from_msg(msg, axis)
+            stamp_ns, u = self.cmd_wire[axis].decode(data)
         except ValueError as err:
             self.get_logger().warning(
                 f"{axis} valve command ignored: {err}", throttle_duration_sec=1.0
@@ -185,60 +233,76 @@ class SimNode(ShellDefaults, Node):
             return
         if not self.started:
             return
+        if self.loop is not None:
+            self.loop.offer(axis, stamp_ns, u)
+            return
         self.core.offer(axis, stamp_ns, u)
-        if self.lockstep and self.core.complete:
+        if self.core.complete:
             self._advance()
 
-    def _lockstep_watch(self) -> None:
+    def _ready(self) -> bool:
+        sp = self.p.startup
+        ok = all(pub.get_subscription_count() >= sp.min_subscribers for pub in self.pubs.values())
+        return ok and all(sub.get_publisher_count() >= 1 for sub in self.cmd_subs)
+
+    def _watch(self) -> None:
+        """Start-up (wait for the subscribers), lockstep timeouts, the realtime loop's end."""
         now = time.monotonic()
-        lp = self.p.lockstep
         if not self.started:
-            ready = all(
-                pub.get_subscription_count() >= lp.min_subscribers for pub in self.pubs.values()
-            )
-            ready = ready and all(sub.get_publisher_count() >= 1 for sub in self.cmd_subs)
+            ready = self._ready()
             if ready and self.t_ready is None:
                 self.t_ready = now
-            if ready and now - self.t_ready >= lp.settle_s:
+            if ready and now - self.t_ready >= self.p.startup.settle_s:
                 self._start()
-            elif now - self.t_start > lp.startup_timeout_s:
+            elif now - self.t_start > self.p.startup.timeout_s:
                 self.get_logger().warning("starting without every expected subscriber/controller")
                 self._start()
+            return
+        if self.loop is not None:
+            if self.loop.finished.is_set() and not self.done.done():
+                self._finish()
         elif not self.axes:  # open loop (axes: none): nobody answers, so step in batches
             for _ in range(1000):
                 if self.done.done() or self.halted:
                     break
                 self._advance()
-        elif now - self.t_published > lp.timeout_s and not self.done.done():
+        elif now - self.t_published > self.p.lockstep.timeout_s and not self.done.done():
             self.get_logger().warning(
-                f"lockstep timeout at sample {self.core.sample.k}: no answer from {', '.join(self.core.waiting_for)}",
+                f"lockstep timeout at sample {self.core.sample.k}: no answer from "
+                f"{', '.join(self.core.waiting_for)}",
                 throttle_duration_sec=1.0,
             )
             self._advance()
 
-    def _realtime_tick(self) -> None:
-        if not self.started:
-            self._start()
-        else:
-            self._advance()
-
     def _start(self) -> None:
         self.started = True
-        self.core.reset()
-        self._publish_sample()
+        if self.loop is not None:
+            self.loop.start()
+        else:
+            self._publish_sample(self.core.reset())
 
     def _finish(self) -> None:
-        self.core.safe_outputs()
-        self._publish_safety_events()
+        if self.loop is None:
+            self.core.safe_outputs()
+            self._publish_safety_events(self._drain(), self.core.sample.stamp_ns)
         self._publish_diagnostics()
         c = self.core.counters()
-        self.get_logger().info(f"finished after {self.core.sample.k + 1} samples; counters {c}")
+        k = self.core.sample.k + 1 if self.core.sample is not None else 0
+        report = self.loop.stats() if self.loop is not None else c
+        self.get_logger().info(f"finished after {k} samples; {report}")
         self.done.set_result(c)
 
     # -- services and diagnostics -----------------------------------------
+    def _locked(self):
+        """The realtime loop's lock (the supervisor is stepped by its thread), or a no-op."""
+        import contextlib
+
+        return self.loop.lock if self.loop is not None else contextlib.nullcontext()
+
     def _on_estop(self, request, response):
         if self.supervisor is not None:
-            self.supervisor.estop("service ~/estop")
+            with self._locked():
+                self.supervisor.estop("service ~/estop")
             response.message = "e-stop latched: both valves at 5 V until ~/reset"
         else:
             self.halted = "service ~/estop"
@@ -248,7 +312,8 @@ class SimNode(ShellDefaults, Node):
 
     def _on_reset(self, request, response):
         if self.supervisor is not None:
-            response.success, response.message = self.supervisor.reset()
+            with self._locked():
+                response.success, response.message = self.supervisor.reset()
         else:
             was, self.halted = self.halted, ""
             response.success, response.message = True, "resumed" if was else "nothing to reset"
@@ -256,16 +321,16 @@ class SimNode(ShellDefaults, Node):
                 self._advance()
         return response
 
-    def _publish_safety_events(self) -> None:
-        if self.supervisor is None:
-            return
-        events = self.supervisor.events()
+    def _publish_safety_events(self, events, stamp_ns: int) -> None:
+        """Supervisor transitions on ``/diagnostics``, stamped with their sample."""
         if events:
-            statuses = safety_statuses("pneu_sim", events)
-            stamp = self.core.sample.stamp_ns
             self.diag_pub.publish(
                 fill_diagnostic_array(
-                    DiagnosticArray(), DiagnosticStatus, KeyValue, stamp, statuses
+                    DiagnosticArray(),
+                    DiagnosticStatus,
+                    KeyValue,
+                    stamp_ns,
+                    safety_statuses("pneu_sim", events),
                 )
             )
 
@@ -274,7 +339,7 @@ class SimNode(ShellDefaults, Node):
         lost = sum(v for k, v in c.items() if not k.startswith("steps"))
         elapsed = max(time.monotonic() - self.t_start, 1e-9)
         sim_s = (self.core.sample.stamp_ns * 1e-9) if self.core.sample is not None else 0.0
-        values = {k: str(v) for k, v in c.items()}
+        values = self.loop.stats() if self.loop is not None else {k: str(v) for k, v in c.items()}
         values.update(
             mode=self.p.mode, sim_time_s=f"{sim_s:.3f}", real_time_factor=f"{sim_s / elapsed:.3g}"
         )
@@ -306,14 +371,9 @@ class SimNode(ShellDefaults, Node):
             now = self.core.sample.stamp_ns if self.core.sample is not None else 0
         else:
             now = self.get_clock().now().nanoseconds
-        out = fill_diagnostic_array(
-            DiagnosticArray(),
-            DiagnosticStatus,
-            KeyValue,
-            now,
-            statuses,
+        self.diag_pub.publish(
+            fill_diagnostic_array(DiagnosticArray(), DiagnosticStatus, KeyValue, now, statuses)
         )
-        self.diag_pub.publish(out)
 
 
 def main(args=None) -> int:

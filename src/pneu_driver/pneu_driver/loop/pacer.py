@@ -1,0 +1,93 @@
+"""Absolute-deadline pacing of a software loop at 1/T, and its timing record.
+
+Tick k is due at t0 + k·T (so errors never accumulate): :meth:`Pacer.wait`
+sleeps until ``spin_us`` before the deadline, then spins on the clock. A
+tick that starts a whole period or more late skips the missed ticks (the
+caller counts them). Used by the sim node's realtime loop and the one-process
+controller manager; the driver loop paces the same way when the DAQ does
+not (software pacing).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+__all__ = ["Pacer", "Timing"]
+
+
+class Timing:
+    """A ring of per-tick durations in ns (e.g. lateness, or sample -> command turnaround)."""
+
+    def __init__(self, window: int = 60_000) -> None:
+        self._ring = np.zeros(int(window), dtype=np.int64)
+        self.n = 0
+        self.max_ns = 0
+
+    def add(self, ns: int) -> None:
+        self._ring[self.n % self._ring.shape[0]] = ns
+        self.n += 1
+        if ns > self.max_ns:
+            self.max_ns = ns
+
+    def values(self) -> np.ndarray:
+        n, w = self.n, self._ring.shape[0]
+        return self._ring[: min(n, w)].copy()
+
+    def percentile_us(self, q: float) -> float:
+        v = self.values()
+        return float(np.percentile(v, q)) * 1e-3 if v.size else float("nan")
+
+    def summary(self, prefix: str) -> dict[str, str]:
+        """``{prefix_p50_us, prefix_p99_us, prefix_max_us, prefix_n}`` as strings (diagnostics)."""
+        return {
+            f"{prefix}_p50_us": f"{self.percentile_us(50):.1f}",
+            f"{prefix}_p99_us": f"{self.percentile_us(99):.1f}",
+            f"{prefix}_max_us": f"{self.max_ns * 1e-3:.1f}",
+            f"{prefix}_n": str(self.n),
+        }
+
+
+class Pacer:
+    """Waits for tick k at t0 + k·T (see the module docstring)."""
+
+    def __init__(
+        self,
+        period_ns: int,
+        spin_us: float = 200.0,
+        clock_ns: Callable[[], int] = time.perf_counter_ns,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
+        if period_ns <= 0:
+            raise ValueError(f"period_ns: {period_ns!r} refused; allowed: > 0")
+        self.T = int(period_ns)
+        self._spin_ns = round(spin_us * 1e3)
+        self._clock = clock_ns
+        self._sleep = sleep
+        self.t0 = clock_ns() + self.T
+        self.lateness = Timing()
+        self.skipped = 0
+
+    def start(self) -> None:
+        """Tick 0 is one period from now."""
+        self.t0 = self._clock() + self.T
+
+    def wait(self, k: int) -> int:
+        """Block until tick k is due; returns the tick actually started (k, or later if late)."""
+        deadline = self.t0 + k * self.T
+        clock = self._clock
+        remaining = deadline - clock()
+        if remaining > self._spin_ns:
+            self._sleep((remaining - self._spin_ns) * 1e-9)
+        while clock() < deadline:
+            pass
+        late = clock() - deadline
+        if late >= self.T:  # whole ticks missed: skip to the current one
+            skip = late // self.T
+            self.skipped += skip
+            k += skip
+            late -= skip * self.T
+        self.lateness.add(late)
+        return k
