@@ -39,6 +39,7 @@ setup(
             "rotary_controller = pneu_control.nodes.controller_node:main_rotary",
             "logger = pneu_control.nodes.logger_node:main",
             "controller_manager = pneu_control.nodes.controller_manager:main",
+            "bench_ros = pneu_control.bench.ros_graph:main",
         ],
     },
 )

@@ -1,0 +1,203 @@
+"""``ros2 run pneu_control bench_ros``: the ROS graph in real time, measured from its bag.
+
+Launches ``ros2 launch pneu_sim sim.launch.py mode:=realtime`` (both axes,
+supervisor on, ``ros2 bag record`` on) for ``--duration`` seconds in the
+chosen deployment and executor, samples each process's CPU time from
+``/proc`` while it runs, then reads the bag and reports:
+
+- ``ticks``: samples the sim's loop stepped; ``missed.<axis>``: ticks without
+  a fresh command from that axis' controller when the sim applied the
+  commands (a skipped tick -- the loop itself too late -- counts as missed);
+- ``turnaround.<axis>`` p50 / p99 / max: from a sample's publication to the
+  publication of the command answering it, both from the bag's
+  ``publish_time`` (the publishers' source timestamps, one clock);
+- ``cpu.<process>``: CPU time / wall time while the run was in its steady part.
+
+Needs ROS 2 and this workspace sourced. Prints a table, or JSON with ``--json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["main", "measure"]
+
+_CLK = os.sysconf("SC_CLK_TCK")
+
+
+def _proc_table() -> dict[int, tuple[int, str, int]]:
+    """pid -> (ppid, name, utime + stime in clock ticks) of every process."""
+    out = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            stat = (d / "stat").read_text()
+            cmd = (d / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        rest = stat[stat.rindex(")") + 2 :].split()
+        ppid, ticks = int(rest[1]), int(rest[11]) + int(rest[12])
+        words = [c.decode(errors="replace") for c in cmd if c]
+        name = _name(words)
+        out[int(d.name)] = (ppid, name, ticks)
+    return out
+
+
+def _name(words: list[str]) -> str:
+    """A readable process name: the node executable, or ``recorder`` for ros2 bag record."""
+    if "bag" in words and "record" in words:
+        return "recorder"
+    for w in words:
+        base = os.path.basename(w)
+        if base in (
+            "sim_node", "linear_controller", "rotary_controller", "logger",
+            "controller_manager", "driver_node",
+        ):  # fmt: skip
+            return base
+    return os.path.basename(words[0]) if words else "?"
+
+
+def _descendants(root: int, table: dict[int, tuple[int, str, int]]) -> list[int]:
+    kids: dict[int, list[int]] = {}
+    for pid, (ppid, _, _) in table.items():
+        kids.setdefault(ppid, []).append(pid)
+    out, todo = [], [root]
+    while todo:
+        p = todo.pop()
+        for c in kids.get(p, []):
+            out.append(c)
+            todo.append(c)
+    return out
+
+
+def _cpu(root: int) -> dict[str, int]:
+    table = _proc_table()
+    acc: dict[str, int] = {}
+    for pid in _descendants(root, table):
+        _, name, ticks = table[pid]
+        if name in ("ros2", "python3", "bash", "sh", "?"):
+            continue
+        acc[name] = acc.get(name, 0) + ticks
+    return acc
+
+
+def _turnaround_us(data, axis: str) -> np.ndarray:
+    sample_topic = "/pneu/pressure/cylinder_1"  # the first of the five a sample is published on
+    s = data[sample_topic]
+    c = data[f"/pneu/{axis}/valve_command"]
+    pub = dict(zip(s.stamp_ns.tolist(), s.publish_time_ns.tolist()))
+    ta = [
+        cp - pub[st] for st, cp in zip(c.stamp_ns.tolist(), c.publish_time_ns.tolist()) if st in pub
+    ]
+    return np.asarray(ta, dtype=np.int64) * 1e-3
+
+
+def _sim_counters(data) -> dict[str, str]:
+    """The sim's last ``pneu_sim: lockstep`` diagnostics values (its loop counters)."""
+    last: dict[str, str] = {}
+    for statuses in data["/diagnostics"].objects:
+        for st in statuses:
+            if st.name == "pneu_sim: lockstep":
+                last = st.values
+    return last
+
+
+def measure(duration_s: float, deployment: str, executor: str, out: Path) -> dict:
+    """Launch, sample CPU, read the bag; returns the figures (see the module docstring)."""
+    from pneu_msgs_py.bag.reader import read_run
+
+    cmd = ["ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py", "mode:=realtime"]
+    cmd += ["axes:=both", f"duration:={duration_s:g}", f"deployment:={deployment}"]
+    cmd += [f"out:={out}"] + ([f"executor:={executor}"] if executor else [])
+    log = open(out.parent / f"{out.name}.log", "w")
+    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        # the steady part: from when the sim is publishing until just before the end
+        deadline = time.monotonic() + 120.0
+        started = None
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (out / "bag" / "metadata.yaml").exists() or _sim_running(out):
+                started = time.monotonic()
+                break
+            time.sleep(0.5)
+        if started is None:
+            raise RuntimeError(f"the sim did not start; see {log.name}")
+        time.sleep(min(3.0, duration_s / 4))
+        t0, c0 = time.monotonic(), _cpu(proc.pid)
+        time.sleep(max(duration_s - 6.0, duration_s / 2))
+        t1, c1 = time.monotonic(), _cpu(proc.pid)
+        proc.wait(timeout=duration_s + 120)
+    except BaseException:
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=60)
+        raise
+    finally:
+        log.close()
+    data = read_run(out / "bag")
+    sim = _sim_counters(data)
+    res: dict = {
+        "deployment": deployment,
+        "executor": executor or "default",
+        "duration_s": duration_s,
+        "ticks": int(sim.get("steps", "0")) + 1,
+        "skipped_ticks": int(sim.get("skipped_ticks", "0")),
+        "recorded_samples": len(data["/pneu/linear/joint_state"]),
+        "load_average": os.getloadavg()[0],
+    }
+    for axis in ("linear", "rotary"):
+        missed = int(sim.get(f"missed.{axis}", "0"))
+        res[f"missed.{axis}"] = missed
+        res[f"missed_pct.{axis}"] = 100.0 * missed / max(res["ticks"], 1)
+        ta = _turnaround_us(data, axis)
+        for q in (50, 99):
+            res[f"turnaround_p{q}_us.{axis}"] = float(np.percentile(ta, q)) if ta.size else None
+        res[f"turnaround_max_us.{axis}"] = float(ta.max()) if ta.size else None
+    for name in sorted(set(c0) | set(c1)):
+        res[f"cpu_pct.{name}"] = 100.0 * (c1.get(name, 0) - c0.get(name, 0)) / _CLK / (t1 - t0)
+    return res
+
+
+def _sim_running(out: Path) -> bool:
+    return (out / "bag").is_dir()
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(
+        prog="ros2 run pneu_control bench_ros", description=__doc__.split("\n")[0]
+    )
+    p.add_argument("--duration", type=float, default=60.0, help="seconds of real time (10..3600)")
+    p.add_argument("--deployment", choices=("nodes", "hosted"), default="nodes")
+    p.add_argument("--executor", choices=("", "events", "single", "auto"), default="")
+    p.add_argument("--out", help="directory for the bag and the launch log (default: a temp dir)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    args = p.parse_args(argv)
+    if not 10.0 <= args.duration <= 3600.0:
+        p.error(f"--duration: {args.duration:g} refused; allowed: [10, 3600] s")
+    base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="pneu_bench_ros_"))
+    base.mkdir(parents=True, exist_ok=True)
+    out = base / f"{args.deployment}_{args.executor or 'default'}"
+    if out.exists():
+        p.error(f"--out: {out} exists; allowed: a directory without a previous bench run")
+    res = measure(args.duration, args.deployment, args.executor, out)
+    if args.json:
+        print(json.dumps(res, indent=1))
+    else:
+        for k, v in res.items():
+            print(f"{k:32s} {v:.4g}" if isinstance(v, float) else f"{k:32s} {v}")
+        print(f"bag: {out / 'bag'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
