@@ -12,12 +12,21 @@ One cycle (DESIGN §3, k = tick, T = 1 ms):
    holds them and writes them at the deadline of tick k+1, just before reading
    sample k+1 -- a one-sample transport delay either way.
 
+5. the heartbeat DO line toggles (``heartbeat.enabled``), unless the
+   supervisor has tripped (``heartbeat.stop_on_trip``): an external
+   missing-pulse relay keeps the supply air on only while it sees edges.
+
 Deadlines are absolute (t0 + k·T), so errors never accumulate; a cycle that
 starts more than a whole period late skips the missed ticks (counted). DAQmx
-late errors (-209800/-209801/-209802) are counted as late cycles and the loop
-goes on; ``max_consecutive_late`` in a row stop it. Whatever ends the loop
-(``stop()``, ``n_cycles``, an exception), ``finally`` writes the safe value and
-closes the backend.
+late errors (:data:`~pneu_driver.daq.nidaqmx_backend.LATE_CODES`) are counted
+as late cycles (per code in ``late_codes``) and the loop goes on;
+``max_consecutive_late`` in a row stop it. Whatever ends the loop (``stop()``,
+``n_cycles``, an exception), ``finally`` writes the safe value, leaves the
+heartbeat low (no more edges) and closes the backend.
+
+``LoopStats`` also keeps each cycle's cost: from the sample's arrival (the
+read's return; software pacing: the cycle's start) to the end of its write and
+heartbeat -- the work the loop does per period, waiting for commands included.
 
 Threads: ``run`` owns the backend and the loop; ``put_command``, ``stop``,
 ``estop``, ``reset``, ``acknowledge`` and ``status`` may be called from any
@@ -108,10 +117,34 @@ class LoopStats:
         self.late_cycles = 0  # started beyond tol, or a DAQmx late error
         self.missed_ticks = 0  # ticks skipped entirely
         self.daq_late_errors = 0
+        self.late_codes: dict[int, int] = {}  # DAQmx status code -> count
         self.max_lateness_ns = 0
+        self.heartbeats = 0  # heartbeat edges written
         self._ring = np.zeros(int(window), dtype=np.int64)
+        self._cost = np.zeros(int(window), dtype=np.int64)
         self._n = 0
+        self._n_cost = 0
         self._last_on_time = False
+
+    def daq_late(self, codes: Iterable[int]) -> None:
+        """A DAQmx late-cycle error (one per read or write that reported it)."""
+        self.daq_late_errors += 1
+        for c in codes:
+            self.late_codes[c] = self.late_codes.get(c, 0) + 1
+
+    def record_cost(self, cost_ns: int) -> None:
+        """One cycle's work [ns]: sample in → outputs written and heartbeat toggled."""
+        self._cost[self._n_cost % self._cost.shape[0]] = cost_ns
+        self._n_cost += 1
+
+    def cost_ns(self) -> np.ndarray:
+        """The most recent per-cycle costs (up to the window), oldest first."""
+        return self._window(self._cost, self._n_cost)
+
+    def cost_us(self, q: float = 50.0) -> float:
+        """The q-th percentile of the per-cycle cost over the window [µs]."""
+        c = self.cost_ns()
+        return float(np.percentile(c, q)) * 1e-3 if c.size else math.nan
 
     def record(self, lateness_ns: int, late: bool = False) -> None:
         """One cycle's start lateness; ``late`` forces it late (a DAQmx late error)."""
@@ -137,11 +170,15 @@ class LoopStats:
 
     def lateness_ns(self) -> np.ndarray:
         """The most recent lateness values (up to the window), oldest first."""
-        n, w = self._n, self._ring.shape[0]
+        return self._window(self._ring, self._n)
+
+    @staticmethod
+    def _window(ring: np.ndarray, n: int) -> np.ndarray:
+        w = ring.shape[0]
         if n <= w:
-            return self._ring[:n].copy()
+            return ring[:n].copy()
         i = n % w
-        return np.concatenate((self._ring[i:], self._ring[:i]))
+        return np.concatenate((ring[i:], ring[:i]))
 
     @property
     def on_time_ratio(self) -> float:
@@ -162,9 +199,13 @@ class LoopStats:
             "late_cycles": self.late_cycles,
             "missed_ticks": self.missed_ticks,
             "daq_late_errors": self.daq_late_errors,
+            "daq_late_codes": " ".join(f"{c}:{n}" for c, n in sorted(self.late_codes.items())),
             "on_time_ratio": self.on_time_ratio,
             "jitter_us_p99": self.jitter_us(99.0),
             "max_lateness_us": self.max_lateness_ns * 1e-3,
+            "cost_us_p50": self.cost_us(50.0),
+            "cost_us_p99": self.cost_us(99.0),
+            "heartbeats": self.heartbeats,
         }
 
 
@@ -217,6 +258,12 @@ class DriverLoop:
             raise ValueError(
                 f"safety counts_per_rev: {supervisor.params.counts_per_rev} refused; allowed: the rig's encoder counts per revolution {rig.encoder.counts_per_rev}"
             )
+        if rig.encoder.max_filtered_rpm < supervisor.params.max_speed_rpm:
+            raise ValueError(
+                f"encoder.dig_filter: {rig.encoder.dig_filter!r} refused; allowed: a filter passing "
+                f"the overspeed trip {supervisor.params.max_speed_rpm:g} rpm (this one loses counts above "
+                f"{rig.encoder.max_filtered_rpm:.0f} rpm at {rig.encoder.ppr} P/R)"
+            )
         if rig.ao.safe_v != SAFE_V:
             raise ValueError(
                 f"ao.safe_v: {rig.ao.safe_v} refused; allowed: {SAFE_V} V (the supervisor's safe value)"
@@ -245,6 +292,11 @@ class DriverLoop:
         self.error: BaseException | None = None
         self.last_sample: SensorSample | None = None
         self.realtime_notes: list[str] = []
+        hb = rig.heartbeat
+        self._hb_on = hb.enabled
+        self._hb_stop_on_trip = hb.stop_on_trip
+        self._hb_level = False
+        self._tripped = False  # the supervisor's latch, read under the lock once per cycle
 
     # ------------------------------------------------------------ any thread
     def put_command(self, axis: str, u: float, stamp_ns: int) -> bool:
@@ -308,7 +360,10 @@ class DriverLoop:
         if n_cycles is not None and n_cycles < 0:
             raise ValueError(f"n_cycles: {n_cycles!r} refused; allowed: an integer ≥ 0 or None")
         stop = stop_event or self._stop  # a stop() before run() ends it at once
-        notes, restore_rt = enable_realtime(self.rig.loop.rt_priority, self.rig.loop.timerslack_ns)
+        lp = self.rig.loop
+        notes, restore_rt = enable_realtime(
+            lp.rt_priority, lp.timerslack_ns, lp.switch_interval_us * 1e-6
+        )
         self.realtime_notes = notes
         try:
             self.backend.open()  # leaves the valves safe; cleans up after itself if it fails
@@ -351,9 +406,12 @@ class DriverLoop:
                 late -= skip * T
                 stats.missed_ticks += skip
             stats.record(late)
+            start = deadline + late
             backend.write(*pending)  # the command computed from sample k-1, at tick k
             raw = backend.read()
             pending = self._cycle(k, raw, deadline)
+            self._beat()
+            stats.record_cost(clock() - start)
             k += 1
             cycles += 1
 
@@ -370,7 +428,7 @@ class DriverLoop:
                 raw = backend.read()  # blocks until the next sample clock
             except LateCycleError as err:
                 raw = None
-                stats.daq_late_errors += 1
+                stats.daq_late(err.codes)
                 consecutive += 1
                 if consecutive >= max_late:
                     raise DriverError(
@@ -391,6 +449,7 @@ class DriverLoop:
                 with self._lock:
                     out = self._sup.outputs(stamp + T)  # the watchdog still runs
                     events = self._sup.events()
+                    self._tripped = self._sup.tripped
                 if events and self._on_events is not None:
                     self._on_events(events)
             else:
@@ -398,9 +457,11 @@ class DriverLoop:
                 out = self._cycle(k, raw, now)
             try:
                 backend.write(*out)  # HW AO: emitted at clock k+1
-            except LateCycleError:
-                stats.daq_late_errors += 1
+            except LateCycleError as err:
+                stats.daq_late(err.codes)
                 stats.mark_late()
+            self._beat()
+            stats.record_cost(clock() - now)
             cycles += 1
 
     def _cycle(self, k: int, raw: RawSample, tick_ns: int) -> tuple[float, float]:
@@ -423,9 +484,18 @@ class DriverLoop:
                 sup.command(axis, u, st)
             out = sup.outputs(stamp + T)
             events = sup.events()
+            self._tripped = sup.tripped
         if events and self._on_events is not None:
             self._on_events(events)
         return out
+
+    def _beat(self) -> None:
+        """Toggle the heartbeat line: this cycle's outputs are written (not while tripped)."""
+        if not self._hb_on or (self._hb_stop_on_trip and self._tripped):
+            return
+        self._hb_level = not self._hb_level
+        self.backend.heartbeat(self._hb_level)
+        self.stats.heartbeats += 1
 
     def _wait_until(self, deadline: int) -> None:
         """Sleep until ``spin_us`` before the deadline, then spin on the clock."""
@@ -437,11 +507,17 @@ class DriverLoop:
             pass
 
     def _shutdown(self, raise_errors: bool) -> None:
-        """Safe value, then close (the backend writes it once more on close)."""
+        """Safe value, heartbeat low (no more edges), then close (the backend writes 5 V once more)."""
         try:
             self.backend.write(SAFE_V, SAFE_V)
         except Exception as err:
             log.error("writing the safe value at shutdown failed: %s", err)
+        if self._hb_on:
+            try:
+                self._hb_level = False
+                self.backend.heartbeat(False)
+            except Exception as err:
+                log.error("setting the heartbeat line low at shutdown failed: %s", err)
         try:
             self.backend.close()
         except Exception as err:
