@@ -11,7 +11,8 @@ convert every argument through them.
 The fake sample clock behaves like DAQmx HW-timed single point: a read waits
 for the next clock; a read that comes after one or more clocks went by
 returns the newest sample and -- only when ``DAQmx_RealTime_ReportMissedSamp``
-was set on the task and after NI's 100 warm-up iterations -- raises -209800
+was set on the task and after the warm-up iterations (NI's default 100, or
+``NumOfWarmupIters``) -- raises -209800
 (-201027 for 3 or more missed clocks). A timed AO write for clock k+1 made
 after clock k+1 raises -209801 (HW-timed output; not governed by
 ReportMissedSamp -- unverified, NI documents that attribute for Read only).
@@ -109,6 +110,9 @@ class FakeLib:
         self.DAQmxSetRealTimeReportMissedSamp = CFunction(
             "DAQmxSetRealTimeReportMissedSamp", daq._set_report_missed_samp
         )
+        self.DAQmxSetRealTimeNumOfWarmupIters = CFunction(
+            "DAQmxSetRealTimeNumOfWarmupIters", daq._set_warmup
+        )
 
 
 class FakeDaq:
@@ -124,6 +128,8 @@ class FakeDaq:
         self.ai_errors = {}  # read number -> DAQmx code (errors other than lateness)
         self.write_errors = {}
         self.report_missed = {}  # task handle value -> ReportMissedSamp
+        self.warmup = {}  # task handle value -> NumOfWarmupIters (DAQmx default: WARMUP)
+        self.keep_default_warmup = False  # True: as if the backend had not set it
         self.stall_after_write = {}  # timed write number -> ns the program stalls after it
         self.n_ai = self.n_ci = 0
         self.t_ns = 10**9  # a fake monotonic clock (the loop's clock_ns)
@@ -218,6 +224,11 @@ class FakeDaq:
         self.log.append(("report_missed", handle.value, enable.value))
         return 0
 
+    def _set_warmup(self, handle, n):
+        if not self.keep_default_warmup:
+            self.warmup[handle.value] = n.value
+        return 0
+
     def role(self, t):
         built = type(t).built  # only look at the channel collections the backend used
         if "ai_channels" in built and t.ai_channels.add_ai_voltage_chan.called:
@@ -255,7 +266,8 @@ class FakeDaq:
             self.next_tick = newest
         self.next_tick += 1
         ai = self.task("ai")
-        if missed and self.report_missed.get(ai._handle.value) and self.n_ai > WARMUP:
+        warmup = self.warmup.get(ai._handle.value, WARMUP)
+        if missed and self.report_missed.get(ai._handle.value) and self.n_ai > warmup:
             code = -201027 if missed >= 3 else -209800
             self.late_raised.append((self.n_ai, code))
             ai._interpreter.check_for_error(code, samps_per_chan_read=1)
@@ -319,6 +331,7 @@ def test_open_hardware_timed_channels_scaling_and_order(daq):
     ]
     ai.timing.cfg_samp_clk_timing.assert_called_once_with(1000.0, source="", sample_mode=HWTSP)
     assert daq.report_missed == {ai._handle.value: True}
+    assert daq.warmup == {ai._handle.value: 0}  # reported from the first cycle
     idx_ai = daq.tasks.index(ai)
     assert daq.log.index(("report_missed", ai._handle.value, True)) < daq.log.index(
         ("start", idx_ai)
@@ -566,12 +579,17 @@ def test_a_stall_after_the_write_is_seen_only_with_reporting_on(daq, report):
         assert loop.last_sample.k == daq.next_tick - 2 - 2  # two clocks lost, unseen
 
 
-def test_no_lateness_reported_during_the_warmup_iterations(daq):
+@pytest.mark.parametrize("warmup_off", [True, False])
+def test_lateness_from_the_first_cycle_with_the_warmup_off(daq, warmup_off):
+    """NI's 100 warm-up iterations would let a stall at cycle 50 shift every later sample
+    index unseen; the backend sets them to 0."""
+    daq.keep_default_warmup = not warmup_off  # what DAQmx does with its default
     loop, controller = run_driver(daq, 60)
     loop._on_sample = stall_at(daq, controller, 50, 3_000_000)
     stats = loop.run(60)
-    assert [c for c in daq.late_raised if c[0] != "write"] == []  # NI's 100 warm-up iterations
-    assert stats.late_codes == {-209801: 1}
+    reads = [c for c in daq.late_raised if c[0] != "write"]
+    assert reads == ([(52, -209800)] if warmup_off else [])
+    assert stats.missed_ticks == (2 if warmup_off else 0)
 
 
 def test_a_driver_without_the_real_time_entry_point_is_a_setup_error(daq, monkeypatch):

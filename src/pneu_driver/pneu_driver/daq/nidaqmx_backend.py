@@ -13,7 +13,9 @@ Call sequence (``open``):
    ``ai.terminal`` (DIFF by default); hardware timing: ``timing.cfg_samp_clk_timing(rate,
    sample_mode=HW_TIMED_SINGLE_POINT)`` on the onboard clock (the master), and
    ``DAQmx_RealTime_ReportMissedSamp`` on (``loop.report_missed_samples``), so
-   that a read that missed sample clocks raises instead of silently returning.
+   that a read that missed sample clocks raises instead of silently returning,
+   from the first cycle (``DAQmx_RealTime_NumOfWarmupIters`` 0; NI's default
+   100 lets the first 0.1 s go unreported).
    nidaqmx-python does not wrap the Real-Time attributes: the setter is called
    through nidaqmx's own library handle (``nidaqmx._lib.lib_importer``; a
    private API, hence the pin ``nidaqmx>=1.7,<1.8``) on the task's handle, and
@@ -61,6 +63,7 @@ real rig").
 
 from __future__ import annotations
 
+import ctypes
 import logging
 from typing import Any
 
@@ -70,7 +73,13 @@ from pneu_driver.daq.errors import DaqIoError, DaqSetupError, DaqUnavailableErro
 from pneu_driver.daq.rig import AI_SENSORS, DIG_FILTERS, RigParams
 from pneu_driver.daq.scaling import RawSample, ao_volts, unwrap_counts
 
-__all__ = ["NidaqmxBackend", "LATE_CODES", "set_report_missed_samp", "visible_devices"]
+__all__ = [
+    "NidaqmxBackend",
+    "LATE_CODES",
+    "set_report_missed_samp",
+    "set_warmup_iterations",
+    "visible_devices",
+]
 
 log = logging.getLogger("pneu_driver.nidaqmx")
 
@@ -100,20 +109,31 @@ def _import_nidaqmx(device: str) -> Any:
     return nidaqmx
 
 
-def set_report_missed_samp(nidaqmx: Any, task: Any, enable: bool) -> None:
-    """``DAQmxSetRealTimeReportMissedSamp(task, enable)`` through nidaqmx's own library handle.
+def _set_real_time(nidaqmx: Any, task: Any, name: str, c_type: Any, value: Any) -> None:
+    """``DAQmxSetRealTime<name>(task, value)`` through nidaqmx's own library handle.
 
-    Not wrapped by nidaqmx-python (its code generator skips the Real-Time
-    functions); same ctypes pattern as its generated setters, and the status
-    goes through the task's interpreter (extended error info, warnings).
+    The Real-Time attributes are not wrapped by nidaqmx-python (its code
+    generator skips them); this is the ctypes pattern of its generated setters,
+    and the status goes through the task's interpreter (extended error info,
+    warnings) like any wrapped call.
     """
     lib = nidaqmx._lib
-    fn = lib.lib_importer.windll.DAQmxSetRealTimeReportMissedSamp
+    fn = getattr(lib.lib_importer.windll, f"DAQmxSetRealTime{name}")
     if fn.argtypes is None:
         with fn.arg_lock:
             if fn.argtypes is None:
-                fn.argtypes = [lib.lib_importer.task_handle, lib.c_bool32]
-    task._interpreter.check_for_error(fn(task._handle, bool(enable)))
+                fn.argtypes = [lib.lib_importer.task_handle, c_type]
+    task._interpreter.check_for_error(fn(task._handle, value))
+
+
+def set_report_missed_samp(nidaqmx: Any, task: Any, enable: bool) -> None:
+    """DAQmx_RealTime_ReportMissedSamp: Read raises -209800 / -201027 after missed clocks."""
+    _set_real_time(nidaqmx, task, "ReportMissedSamp", nidaqmx._lib.c_bool32, bool(enable))
+
+
+def set_warmup_iterations(nidaqmx: Any, task: Any, n: int) -> None:
+    """DAQmx_RealTime_NumOfWarmupIters (NI's default 100): iterations before lateness is reported."""
+    _set_real_time(nidaqmx, task, "NumOfWarmupIters", ctypes.c_uint32, int(n))
 
 
 def visible_devices(device: str = "Dev1") -> list[str]:
@@ -193,6 +213,9 @@ class NidaqmxBackend:
                 if rig.loop.report_missed_samples:
                     step = "enabling missed-sample reporting (DAQmx_RealTime_ReportMissedSamp)"
                     set_report_missed_samp(nidaqmx, ai, True)
+                    # from the first cycle: a late read NI's warm-up let pass would shift
+                    # every later sample index (and trip the encoder-jump rule)
+                    set_warmup_iterations(nidaqmx, ai, 0)
             step = "creating the encoder (CI) task"
             ci = self._new_task()
             chan = ci.ci_channels.add_ci_ang_encoder_chan(

@@ -420,14 +420,20 @@ class DriverLoop:
         max_late = self.rig.loop.max_consecutive_late
         k = -1
         t_prev: int | None = None
+        # the sample clock's phase on our clock: min over clock-paced reads of (return - k·T)
+        # (a read never returns before its clock); may rise by 100 ppm of T per cycle (drift)
+        anchor: int | None = None
+        drift = T // 10_000
         consecutive = 0
         cycles = 0
         while not self._stopped(stop) and (n_cycles is None or cycles < n_cycles):
             raw: RawSample | None
+            at_least = 0  # clocks DAQmx says were missed
             try:
                 raw = backend.read()  # blocks until the next sample clock
             except LateCycleError as err:
                 raw = None
+                at_least = err.min_missed
                 stats.daq_late(err.codes)
                 consecutive += 1
                 if consecutive >= max_late:
@@ -436,14 +442,18 @@ class DriverLoop:
                     ) from err
             now = clock()
             step = 1
-            if (
-                raw is None and t_prev is not None
-            ):  # missed clock(s): how many, from the elapsed time
-                step = max(1, round((now - t_prev) / T))
+            if raw is None and t_prev is not None:
+                # missed clock(s): a late read returns the newest sample at once, so its clock
+                # is the last one before now on the clock's phase; at least what DAQmx says
+                est = round((now - t_prev) / T) if anchor is None else (now - anchor) // T - k
+                step = max(1 + at_least, est)
             stats.record(0 if t_prev is None else now - t_prev - step * T, late=raw is None)
             stats.missed_ticks += step - 1
             k += step
             t_prev = now
+            if raw is not None:
+                a = now - k * T
+                anchor = a if anchor is None or a < anchor + drift else anchor + drift
             if raw is None:
                 stamp = self._epoch_ns + k * T
                 with self._lock:
