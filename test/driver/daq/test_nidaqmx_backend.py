@@ -136,6 +136,7 @@ class FakeDaq:
         self.t0_ns = None  # when the AI task (the sample clock) started
         self.next_tick = 1  # index of the next sample clock a read will return
         self.late_raised = []
+        self._by_role = {}
 
         task_cls = mock.create_autospec(REAL_TASK, spec_set=True)
         task_cls.side_effect = self._new_task
@@ -240,7 +241,11 @@ class FakeDaq:
         return "ao_now" if t.write.called else "ao"
 
     def task(self, role):
+        if role in self._by_role:  # a task's role is fixed once its channels exist
+            return self._by_role[role]
         [t] = [t for t in self.tasks if self.role(t) == role]
+        if role != "ao":  # "ao" is also what a task without channels looks like
+            self._by_role[role] = t
         return t
 
     def timed(self, role):
