@@ -32,6 +32,32 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rig", default=None, metavar="FILE", help="rig.yaml (default: config/)")
     p.add_argument("--safety", default=None, metavar="FILE", help="safety.yaml")
     p.add_argument("--out", default=None, metavar="DIR", help="write run.mcap and loop.json here")
+    p.add_argument(
+        "--hold",
+        default="",
+        metavar="AXIS=V[,AXIS=V]",
+        help="command these valves a constant voltage instead of a controller (bring-up: "
+        "neutral trim), e.g. linear=5.05",
+    )
+
+
+def parse_hold(text: str) -> dict[str, float]:
+    """``linear=5.05,rotary=5`` -> ``{"linear": 5.05, "rotary": 5.0}`` (0-10 V, each axis once)."""
+    from pneu_msgs_py.contract.samples import AXES, U_MAX_V, U_MIN_V
+    from pneu_msgs_py.params.core import ParamError
+    from pneu_msgs_py.params.spec import parse_spec
+
+    if not text:
+        return {}
+    _, values = parse_spec("hold:" + text, "--hold")
+    out = {}
+    for axis, v in values.items():
+        if axis not in AXES:
+            raise ParamError("--hold", axis, "one of " + ", ".join(AXES))
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not U_MIN_V <= v <= U_MAX_V:
+            raise ParamError(f"--hold {axis}", v, f"[{U_MIN_V:g}, {U_MAX_V:g}] V")
+        out[axis] = float(v)
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -44,8 +70,9 @@ def run(args: argparse.Namespace) -> int:
             f"--duration: {args.duration!r} refused; allowed: >= 0 s (0: until Ctrl-C)"
         )
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
+    hold = parse_hold(args.hold)
     spec = session.build_spec(
-        axes=axes,
+        axes=tuple(a for a in axes if a not in hold) or axes,
         controller=args.controller,
         reference=args.reference,
         sets=args.set,
@@ -59,7 +86,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"pneu rig: backend {args.backend}, axes {', '.join(axes)}", file=sys.stderr)
     with session.sigterm_as_interrupt():
         result = run_rig(
-            args.backend, spec, rig, duration_s=args.duration or None, out_dir=args.out, echo=echo
+            args.backend,
+            spec,
+            rig,
+            duration_s=args.duration or None,
+            out_dir=args.out,
+            echo=echo | {"hold": hold},
+            hold=hold,
         )
     d = result.diagnostics
     print(
@@ -68,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         f"cost p50 {float(d['cost_us_p50']):.0f} us  p99 {float(d['cost_us_p99']):.0f} us  "
         f"heartbeats {d['heartbeats']}"
     )
-    for axis in axes:
+    for axis in dict.fromkeys((*axes, *hold)):
         print(f"safety  {axis:7s} {d[f'{axis}.state']} {d[f'{axis}.causes']}")
     if result.bag is not None:
         print(f"wrote {result.bag}", file=sys.stderr)

@@ -63,18 +63,26 @@ def run_rig(
     out_dir: str | Path | None = None,
     echo: dict[str, Any] | None = None,
     stop: threading.Event | None = None,
+    hold: dict[str, float] | None = None,
 ) -> RigRunResult:
     """Run ``spec``'s controllers (a :class:`~pneu_control.experiment.runner.RunSpec`) on
-    ``backend`` for ``duration_s`` (None: until ``stop`` is set or Ctrl-C)."""
+    ``backend`` for ``duration_s`` (None: until ``stop`` is set or Ctrl-C).
+
+    ``hold``: axes commanded a constant voltage instead (bring-up: valve neutral trim).
+    """
+    hold = hold or {}
     daq = make_backend(backend, rig)
     sup = SafetySupervisor(spec.safety, sample_time_s=rig.period_s)
-    ctrls = [(a, AxisController(a, spec.controllers[a])) for a in spec.axes]
+    ctrls = [(a, AxisController(a, spec.controllers[a])) for a in spec.axes if a not in hold]
+    held = tuple(hold.items())
     cycles: list[tuple[Any, list[tuple[str, float, tuple[float, ...], str]]]] = []
     events: list[Any] = []
     loop: DriverLoop
 
     def on_sample(s: Any) -> None:
         answers = []
+        for axis, u in held:
+            loop.put_command(axis, u, s.stamp_ns)
         for axis, c in ctrls:
             u = c.update(s)
             loop.put_command(axis, u, s.stamp_ns)
@@ -82,7 +90,12 @@ def run_rig(
         cycles.append((s, answers))
 
     loop = DriverLoop(
-        daq, rig, sup, on_sample=on_sample, on_events=events.extend, expected_axes=spec.axes
+        daq,
+        rig,
+        sup,
+        on_sample=on_sample,
+        on_events=events.extend,
+        expected_axes=tuple(dict.fromkeys((*spec.axes, *hold))),
     )
     n = None if duration_s is None else max(1, round(duration_s * rig.loop.rate_hz))
     stats_marks: list[tuple[int, dict[str, str]]] = []
