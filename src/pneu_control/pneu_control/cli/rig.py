@@ -95,6 +95,9 @@ def run(args: argparse.Namespace) -> int:
             hold=hold,
         )
     d = result.diagnostics
+    if result.error is not None and d["cycles"] == "0":  # the DAQ never opened
+        print(f"pneu rig: error: {result.error}", file=sys.stderr)
+        return 1
     print(
         f"cycles {d['cycles']}  late {d['late_cycles']}  missed ticks {d['missed_ticks']}  "
         f"DAQmx late {d['daq_late_errors']} ({d['daq_late_codes'] or '-'})  "

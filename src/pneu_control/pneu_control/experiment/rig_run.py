@@ -99,7 +99,15 @@ def run_rig(
     )
     n = None if duration_s is None else max(1, round(duration_s * rig.loop.rate_hz))
     stats_marks: list[tuple[int, dict[str, str]]] = []
-    th = loop.start(n, name="pneu_rig_loop")
+
+    def target() -> None:
+        try:
+            loop.run(n)
+        except BaseException as err:  # reported by the caller (one line), valves already safe
+            loop.error = err
+
+    th = threading.Thread(target=target, name="pneu_rig_loop", daemon=True)
+    th.start()
     try:
         while th.is_alive():
             th.join(timeout=1.0)
