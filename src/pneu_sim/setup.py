@@ -32,5 +32,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": ["sim_node = pneu_sim.nodes.sim_node:main"],
+        # the twin as a DAQ, found by name by pneu_driver (backend: sim) without an import
+        "pneu_driver.backends": ["sim = pneu_sim.daq_sim.backend:make_backend"],
     },
 )

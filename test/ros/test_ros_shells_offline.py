@@ -219,32 +219,22 @@ def test_driver_without_daq_names_the_device_and_exits_1(world, capsys):
 def test_driver_node_with_the_twin_behind_the_daq_publishes_forwards_and_ends_safe(
     world, tmp_path, monkeypatch
 ):
-    """The driver shell around DriverLoop, with SimBackend in place of nidaqmx (software pacing)."""
+    """The driver shell around DriverLoop with ``backend: sim`` (the twin as a simulated card)."""
     import pneu_driver.nodes.driver_node as dn
-    import yaml
-    from pneu_driver.daq.backend import SimBackend
-    from pneu_msgs_py.params.paths import config_file
-    from pneu_sim.physics.plant import Plant
-    from pneu_sim.physics.plant_file import load_plant
     from rclpy.executors import SingleThreadedExecutor
 
-    rig = yaml.safe_load(config_file("rig.yaml").read_text())
-    rig.setdefault("loop", {})["timing"] = "software"
-    rig_file = tmp_path / "rig.yaml"
-    rig_file.write_text(yaml.safe_dump(rig))
-    backends = []
+    def no_nidaqmx(device):
+        raise AssertionError("backend sim must not look for an NI device")
 
-    def sim_backend(rig_params):
-        backends.append(SimBackend(Plant(load_plant(), seed=0), rig_params))
-        return backends[-1]
-
-    monkeypatch.setattr(dn, "NidaqmxBackend", sim_backend)
-    monkeypatch.setattr(dn, "visible_devices", lambda device: [device])
-    world.overrides["/pneu_driver"] = {"rig_file": str(rig_file), "axes": "linear"}
+    monkeypatch.setattr(dn, "visible_devices", no_nidaqmx)
+    card = tmp_path / "card"
+    world.overrides["/pneu_driver"] = {"axes": "linear", "backend": f"sim:card={card}"}
     world.overrides["/linear_controller"] = {"mode": "realtime"}
     from pneu_control.nodes.controller_node import ControllerNode
+    from pneu_sim.daq_sim.card import read_card_state
 
     drv, ctrl = dn.DriverNode(), ControllerNode("linear")
+    daq = drv.loop.backend
     ex = SingleThreadedExecutor()
     ex.add_node(drv)
     ex.add_node(ctrl)
@@ -253,16 +243,22 @@ def test_driver_node_with_the_twin_behind_the_daq_publishes_forwards_and_ends_sa
         _spin_until(ex, lambda: ctrl.core.n_samples >= 50, timeout_s=60.0)
         assert drv.loop.commands._newest["linear"] > 0  # commands reached the loop
         assert drv.stamp_offset_ns is not None
+        assert read_card_state(card).do_edges > 0  # the heartbeat runs
         r = world.call("/pneu_driver/estop")
         assert r.success and drv.loop.status()["linear"].state == "SAFE"
-        k = backends[0].writes
-        _spin_until(ex, lambda: backends[0].writes > k + 20, timeout_s=30.0)
-        assert backends[0].last_written == (5.0, 5.0)  # e-stopped: the valves get 5 V
+        k = daq.reads
+        _spin_until(ex, lambda: daq.reads > k + 20, timeout_s=30.0)
+        st = read_card_state(card)
+        assert (st.ao0_v, st.ao1_v) == (5.0, 5.0)  # e-stopped: the valves get 5 V
+        edges = st.do_edges
+        _spin_until(ex, lambda: daq.reads > k + 40, timeout_s=30.0)
+        assert read_card_state(card).do_edges == edges  # tripped: the heartbeat stopped
     finally:
         drv.loop.stop()
         drv.thread.join(timeout=5.0)
     assert not drv.thread.is_alive() and drv.loop.error is None
-    assert backends[0].last_written == (5.0, 5.0) and not backends[0].is_open
+    st = read_card_state(card)
+    assert (st.ao0_v, st.ao1_v, st.do_level) == (5.0, 5.0, False) and not daq.is_open
 
 
 def test_sim_open_loop_lockstep_runs_to_its_duration(world):

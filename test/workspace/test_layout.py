@@ -185,7 +185,7 @@ def _role(pkg: str, f: Path) -> str:
 # role folders per package: the tree reads like the architecture (ARCHITECTURE.md)
 ROLES = {
     "pneu_msgs_py": {"contract", "params", "bag", "nodes", "bench"},
-    "pneu_sim": {"physics", "cycle", "faults", "nodes", "cli", "bench"},
+    "pneu_sim": {"physics", "cycle", "faults", "daq_sim", "nodes", "cli", "bench"},
     "pneu_control": {
         "algorithms",
         "observers",

@@ -4,6 +4,7 @@ Example::
 
     ros2 launch pneu_driver rig.launch.py controller:=eso_smc axes:=linear \\
         reference:=sine:amplitude=20,frequency_hz=0.25 out:=/tmp/rig_run
+    ros2 launch pneu_driver rig.launch.py backend:=sim gains:=retuned   # rehearsal, no hardware
 
 Everything runs in realtime (wall clock, the DAQ's sample clock paces the
 driver); stop with Ctrl-C -- the driver writes 5 V to both valves, the
@@ -29,6 +30,13 @@ ARGS = [
     *launch_arguments("paper", "the paper's gains, tuned on the authors' rig"),
     ("out", "out/rig", "directory of the bag (run.mcap)", None),
     ("rig_file", "", "rig YAML ('' = installed config/rig.yaml)", None),
+    (
+        "backend",
+        "nidaqmx",
+        "the DAQ: nidaqmx (the PCI-6221) or sim[:seed=0,card=FILE,stall_at_s=S,stall_ms=MS] "
+        "(the twin as a simulated card: a rehearsal without hardware)",
+        None,
+    ),
 ]
 
 
@@ -38,6 +46,7 @@ def _setup(arg: dict[str, str]) -> list:
         "rig_file": arg["rig_file"] or os.path.join(config, "rig.yaml"),
         "safety_file": os.path.join(config, "safety.yaml"),
         "axes": arg["axes"],
+        "backend": arg["backend"],
     }
     exit_action = [Shutdown(reason="driver stopped")]
     if arg["deployment"] == "hosted":

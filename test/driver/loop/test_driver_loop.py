@@ -234,6 +234,9 @@ class PacedBackend:
     def write(self, a, b):
         self.writes.append(("w", a, b))
 
+    def heartbeat(self, level):
+        self.writes.append(("hb", level))
+
     def close(self):
         self.closed = True
 
@@ -266,7 +269,7 @@ def test_hardware_pacing_counts_late_cycles_and_goes_on():
     ]  # two late reads spanned 4 clocks: indices follow the clock
     assert be.n == 10  # one read per cycle
     assert len([w for w in be.writes if w[0] == "w"]) == 11  # one write per cycle + the shutdown's
-    assert be.writes[-1] == ("w", 5.0, 5.0) and be.closed
+    assert be.writes[-2:] == [("w", 5.0, 5.0), ("hb", False)] and be.closed
 
 
 def test_hardware_pacing_stops_after_too_many_late_cycles():
@@ -283,7 +286,7 @@ def test_hardware_pacing_stops_after_too_many_late_cycles():
     )
     with pytest.raises(DriverError, match="5 late cycles in a row"):
         loop.run(50)
-    assert be.writes[-1] == ("w", 5.0, 5.0) and be.closed
+    assert be.writes[-2:] == [("w", 5.0, 5.0), ("hb", False)] and be.closed
 
 
 def test_fatal_read_error_writes_safe_and_propagates():
@@ -299,7 +302,7 @@ def test_fatal_read_error_writes_safe_and_propagates():
     )
     with pytest.raises(OSError, match="bus error"):
         loop.run(10)
-    assert be.writes[-1] == ("w", 5.0, 5.0) and be.closed
+    assert be.writes[-2:] == [("w", 5.0, 5.0), ("hb", False)] and be.closed
 
 
 def test_command_slot_across_threads():

@@ -21,6 +21,7 @@ __all__ = ["main", "SUBCOMMANDS"]
 SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("sim", "pneu_sim.cli.sim"),
     ("run", "pneu_control.cli.run"),
+    ("rig", "pneu_control.cli.rig"),
     ("paper", "pneu_control.cli.paper"),
     ("analyze", "pneu_control.cli.analyze"),
     ("plot", "pneu_control.cli.plot"),

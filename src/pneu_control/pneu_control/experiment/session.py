@@ -157,7 +157,7 @@ def config_echo(spec: RunSpec) -> dict[str, Any]:
 
 
 @contextlib.contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
+def sigterm_as_interrupt() -> Iterator[None]:
     """SIGTERM behaves like Ctrl-C so the bag is finalised either way."""
 
     def handler(signum, frame):
@@ -200,7 +200,7 @@ def execute(
     out.mkdir(parents=True, exist_ok=True)
     echo = config_echo(spec)
     report = _progress_printer(spec.duration_s, spec.name) if progress else None
-    with _sigterm_as_interrupt():
+    with sigterm_as_interrupt():
         if bag:
             from pneu_control.experiment.bag_log import (
                 INTERVALS_METADATA,

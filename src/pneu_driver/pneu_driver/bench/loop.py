@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 import time
 from typing import Any
 
@@ -27,7 +28,7 @@ from pneu_driver.daq.rig import RigParams
 from pneu_driver.loop.driver_loop import DriverLoop
 from pneu_driver.safety import SafetyParams, SafetySupervisor
 
-__all__ = ["TrivialPlant", "loop_pacing"]
+__all__ = ["TrivialPlant", "gil_contention", "loop_pacing"]
 
 
 class TrivialPlant:
@@ -120,3 +121,68 @@ def loop_pacing(
         "loop_duration_s": wall,
         "loop_realtime": "; ".join(loop.realtime_notes) or "normal scheduling",
     }
+
+
+def _busy_python(stop: threading.Event, counter: list[int]) -> None:
+    """Pure-Python work in a second thread, as an rclpy executor deserialising messages."""
+    while not stop.is_set():
+        acc = 0
+        for i in range(2000):
+            acc += i * i
+        counter[0] += 1
+
+
+def gil_contention(
+    switch_intervals_us: tuple[float, ...] = (5000.0, 1000.0, 200.0, 50.0),
+    duration_s: float = 3.0,
+    backend: str = "sim",
+    busy: bool = True,
+) -> dict[str, dict[str, Any]]:
+    """The hardware-paced loop on ``backend`` (default: the twin as a simulated card, found by
+    name) beside a busy pure-Python thread, per GIL switch interval.
+
+    Per interval: the loop's lateness p50/p99/max after each sample clock [µs], late cycles,
+    missed ticks, per-cycle cost p50/p99 [µs], and the other thread's work rate (what a short
+    interval costs it). ``busy=False`` measures the loop alone.
+    """
+    from pneu_driver.daq.backends import make_backend
+    from pneu_driver.daq.rig import load_rig_params
+
+    out: dict[str, dict[str, Any]] = {}
+    for si in switch_intervals_us:
+        rig = with_updates(
+            load_rig_params(),
+            {"loop.rt_priority": 0, "loop.switch_interval_us": float(si)},
+        )
+        sup = SafetySupervisor(
+            SafetyParams(counts_per_rev=rig.encoder.counts_per_rev, watchdog_ms=1000.0),
+            rig.period_s,
+        )
+        loop = DriverLoop(make_backend(backend, rig), rig, sup, expected_axes=())
+        stop = threading.Event()
+        counter = [0]
+        other = threading.Thread(target=_busy_python, args=(stop, counter), daemon=True)
+        load = os.getloadavg()[0]
+        t0 = time.perf_counter()
+        if busy:
+            other.start()
+        try:
+            stats = loop.run(max(1, round(duration_s * rig.loop.rate_hz)))
+        finally:
+            stop.set()
+            if busy:
+                other.join()
+        wall = time.perf_counter() - t0
+        lat = np.abs(stats.lateness_ns()) * 1e-3
+        out[f"{si:g}us"] = {
+            "lateness_us_p50": float(np.percentile(lat, 50)),
+            "lateness_us_p99": float(np.percentile(lat, 99)),
+            "lateness_us_max": float(lat.max()),
+            "late_cycles": stats.late_cycles,
+            "missed_ticks": stats.missed_ticks,
+            "cost_us_p50": stats.cost_us(50.0),
+            "cost_us_p99": stats.cost_us(99.0),
+            "other_thread_work_per_s": counter[0] / wall,
+            "load_avg_1min": max(load, os.getloadavg()[0]),
+        }
+    return out

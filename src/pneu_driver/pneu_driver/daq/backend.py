@@ -28,6 +28,10 @@ class DaqBackend(Protocol):
     clock (HW-timed single point); False when the loop paces itself.
     ``open`` leaves the valves safe (5 V) before anything is enabled;
     ``close`` leaves them safe whatever state the device is in.
+    ``heartbeat(level)`` sets the heartbeat DO line (the loop toggles it once
+    per cycle; a backend without the line ignores it). A hardware-paced
+    backend raises :class:`~pneu_driver.daq.errors.LateCycleError` from
+    ``read``/``write`` when sample clocks were missed.
     """
 
     hardware_paced: bool
@@ -37,6 +41,8 @@ class DaqBackend(Protocol):
     def read(self) -> RawSample: ...
 
     def write(self, u_linear: float, u_rotary: float) -> None: ...
+
+    def heartbeat(self, level: bool) -> None: ...
 
     def close(self) -> None: ...
 
@@ -67,6 +73,8 @@ class SimBackend:
         self.is_open = False
         self.reads = 0
         self.writes = 0
+        self.heartbeat_level = False
+        self.heartbeat_edges = 0
 
     @property
     def last_written(self) -> tuple[float, float]:
@@ -87,6 +95,11 @@ class SimBackend:
         ao = self.rig.ao
         self._u_current = (ao_volts(u_linear, ao), ao_volts(u_rotary, ao))
         self.writes += 1
+
+    def heartbeat(self, level: bool) -> None:
+        level = bool(level)
+        self.heartbeat_edges += level != self.heartbeat_level
+        self.heartbeat_level = level
 
     def close(self) -> None:
         safe = self.rig.ao.safe_v

@@ -1,4 +1,4 @@
-"""The real rig through nidaqmx (NI PCI-6221): three tasks, HW-timed single point at 1 kHz.
+"""The real rig through nidaqmx (NI PCI-6221): HW-timed single point at 1 kHz, a heartbeat line.
 
 Call sequence (``open``):
 
@@ -9,12 +9,23 @@ Call sequence (``open``):
 2. Valves safe first: a throw-away on-demand AO task writes 5 V to both valves
    (``Task.write([5.0, 5.0], auto_start=True)``) and is closed; the AO keeps the value.
 3. AI task: four ``ai_channels.add_ai_voltage_chan(phys, name, terminal_config,
-   min_val, max_val)``; hardware timing: ``timing.cfg_samp_clk_timing(rate,
-   sample_mode=HW_TIMED_SINGLE_POINT)`` on the onboard clock (the master).
+   min_val, max_val)``, the terminal configuration per sensor from
+   ``ai.terminal`` (DIFF by default); hardware timing: ``timing.cfg_samp_clk_timing(rate,
+   sample_mode=HW_TIMED_SINGLE_POINT)`` on the onboard clock (the master), and
+   ``DAQmx_RealTime_ReportMissedSamp`` on (``loop.report_missed_samples``), so
+   that a read that missed sample clocks raises instead of silently returning,
+   from the first cycle (``DAQmx_RealTime_NumOfWarmupIters`` 0; NI's default
+   100 lets the first 0.1 s go unreported).
+   nidaqmx-python does not wrap the Real-Time attributes: the setter is called
+   through nidaqmx's own library handle (``nidaqmx._lib.lib_importer``; a
+   private API, hence the pin ``nidaqmx>=1.7,<1.8``) on the task's handle, and
+   its status goes through the task's ``check_for_error`` like any wrapped call.
 4. CI task: ``ci_channels.add_ci_ang_encoder_chan(counter, "encoder",
    decoding_type=X_4, zidx_enable=False, units=AngleUnits.TICKS,
-   pulses_per_rev=ppr, initial_angle=0.0)``; on the sample clock: programmed
-   I/O (``ci_data_xfer_mech = POLLED``, else DAQmx -200842) and
+   pulses_per_rev=ppr, initial_angle=0.0)``; A and B digital filters
+   (``ci_encoder_{a,b}_input_dig_fltr_enable`` / ``..._min_pulse_width``,
+   ``encoder.dig_filter``); on the sample clock: programmed I/O
+   (``ci_data_xfer_mech = POLLED``, else DAQmx -200842) and
    ``cfg_samp_clk_timing(rate, source="/Dev1/ai/SampleClock", sample_mode=HW_TIMED_SINGLE_POINT)``.
 5. AO task: two ``ao_channels.add_ao_voltage_chan(phys, name, min_val=0, max_val=10)``;
    on the sample clock: ``cfg_samp_clk_timing(rate, source="/Dev1/ai/SampleClock", ...)``,
@@ -22,37 +33,62 @@ Call sequence (``open``):
    value is written once more before the task starts (if DAQmx refuses a write
    to an unstarted HW-timed single-point task, that is logged and ignored: the
    on-demand value of step 2 holds).
-6. Start CI and AO (slaves), then AI (its clock starts them all).
+6. Heartbeat task (``heartbeat.enabled``): one on-demand DO line
+   (``do_channels.add_do_chan(line, "heartbeat", line_grouping=CHAN_PER_LINE)``),
+   written low and started; ``heartbeat(level)`` is one
+   ``DigitalSingleChannelWriter.write_one_sample_one_line`` (one DAQmx call).
+   On demand, not clocked: a loop that stops calling leaves the line still.
+7. Start CI and AO (slaves), then AI (its clock starts them all).
+
+Every stream reader/writer has ``verify_array_shape = False`` (the buffers are
+preallocated with the right shape; True costs one driver query per call).
 
 Per cycle: ``AnalogMultiChannelReader.read_one_sample(buf, timeout)`` (blocks
 until the next sample clock in HW-timed single point), ``CounterReader.read_one_sample_double(timeout)``,
-and ``AnalogMultiChannelWriter.write_one_sample(buf, timeout)``. DAQmx -209800
-(read not done before the next clock), -209801 (write not done before the next
-clock) and -209802 (missed clocks) become :class:`~pneu_driver.daq.errors.LateCycleError`
-(counted, not fatal); any other DAQmx error is fatal.
+``AnalogMultiChannelWriter.write_one_sample(buf, timeout)`` and the heartbeat
+write. The late-cycle codes in :data:`LATE_CODES` become
+:class:`~pneu_driver.daq.errors.LateCycleError` (counted, not fatal); any other
+DAQmx error is fatal.
 
 ``close``: stop AI (the clock) then the others, close all, then the on-demand
 safe write again, so the valves end at 5 V even if the timed AO never emitted
 its last value.
+
+What the card does when this process cannot run ``close`` (killed, crashed,
+hung): M Series AO keep their last value and the DO line its last level; after
+a device reset or power-up the AO go to 0 V -- a fully open MPYE. Only the
+external interlock on the heartbeat makes that safe (README, "Safety on the
+real rig").
 """
 
 from __future__ import annotations
 
+import ctypes
 import logging
 from typing import Any
 
 import numpy as np
 
 from pneu_driver.daq.errors import DaqIoError, DaqSetupError, DaqUnavailableError, LateCycleError
-from pneu_driver.daq.rig import AI_SENSORS, RigParams
+from pneu_driver.daq.rig import AI_SENSORS, DIG_FILTERS, RigParams
 from pneu_driver.daq.scaling import RawSample, ao_volts, unwrap_counts
 
-__all__ = ["NidaqmxBackend", "LATE_CODES", "visible_devices"]
+__all__ = [
+    "NidaqmxBackend",
+    "LATE_CODES",
+    "set_report_missed_samp",
+    "set_warmup_iterations",
+    "visible_devices",
+]
 
 log = logging.getLogger("pneu_driver.nidaqmx")
 
-# DAQmx status codes of a HW-timed single-point loop that missed its clock
-LATE_CODES = frozenset({-209800, -209801, -209802})
+# DAQmx status codes of a HW-timed single-point loop that missed its clock (nidaqmx error_codes):
+# -209800 Read not complete before the next sample clock (reported with ReportMissedSamp on),
+# -209801 Write not complete before the next sample clock (HW-timed output),
+# -209802 / -209803 WaitForNextSampleClock saw 1 / 3 or more missed clocks,
+# -201027 WaitForNextSampleClock or Read saw 3 or more missed clocks (ReportMissedSamp on).
+LATE_CODES = frozenset({-209800, -209801, -209802, -209803, -201027})
 
 
 def _import_nidaqmx(device: str) -> Any:
@@ -63,6 +99,7 @@ def _import_nidaqmx(device: str) -> Any:
         import nidaqmx.stream_readers
         import nidaqmx.stream_writers
         import nidaqmx.system
+        from nidaqmx import _lib  # noqa: F401  (private: the Real-Time attribute setter)
     except ImportError as err:
         raise DaqUnavailableError(
             device,
@@ -70,6 +107,33 @@ def _import_nidaqmx(device: str) -> Any:
             f"the nidaqmx Python package is not installed ({err}); cannot open DAQ device {device!r}",
         ) from err
     return nidaqmx
+
+
+def _set_real_time(nidaqmx: Any, task: Any, name: str, c_type: Any, value: Any) -> None:
+    """``DAQmxSetRealTime<name>(task, value)`` through nidaqmx's own library handle.
+
+    The Real-Time attributes are not wrapped by nidaqmx-python (its code
+    generator skips them); this is the ctypes pattern of its generated setters,
+    and the status goes through the task's interpreter (extended error info,
+    warnings) like any wrapped call.
+    """
+    lib = nidaqmx._lib
+    fn = getattr(lib.lib_importer.windll, f"DAQmxSetRealTime{name}")
+    if fn.argtypes is None:
+        with fn.arg_lock:
+            if fn.argtypes is None:
+                fn.argtypes = [lib.lib_importer.task_handle, c_type]
+    task._interpreter.check_for_error(fn(task._handle, value))
+
+
+def set_report_missed_samp(nidaqmx: Any, task: Any, enable: bool) -> None:
+    """DAQmx_RealTime_ReportMissedSamp: Read raises -209800 / -201027 after missed clocks."""
+    _set_real_time(nidaqmx, task, "ReportMissedSamp", nidaqmx._lib.c_bool32, bool(enable))
+
+
+def set_warmup_iterations(nidaqmx: Any, task: Any, n: int) -> None:
+    """DAQmx_RealTime_NumOfWarmupIters (NI's default 100): iterations before lateness is reported."""
+    _set_real_time(nidaqmx, task, "NumOfWarmupIters", ctypes.c_uint32, int(n))
 
 
 def visible_devices(device: str = "Dev1") -> list[str]:
@@ -109,6 +173,7 @@ class NidaqmxBackend:
         self._ai_reader: Any = None
         self._ci_reader: Any = None
         self._writer: Any = None
+        self._do_writer: Any = None
         self._ai_buf = np.zeros(len(AI_SENSORS), dtype=np.float64)
         self._ao_buf = np.zeros(2, dtype=np.float64)
         self._counts = 0
@@ -135,17 +200,22 @@ class NidaqmxBackend:
             self._write_safe_on_demand()
             step = "creating the AI task"
             ai = self._new_task()
-            terminal = c.TerminalConfiguration[rig.ai.terminal_config]
             for name in AI_SENSORS:
                 ai.ai_channels.add_ai_voltage_chan(
                     self._phys(getattr(rig.channels, name)),
                     name,
-                    terminal_config=terminal,
+                    terminal_config=c.TerminalConfiguration[getattr(rig.ai.terminal, name)],
                     min_val=rig.ai.min_v,
                     max_val=rig.ai.max_v,
                 )
             if self.hardware_paced:
                 ai.timing.cfg_samp_clk_timing(rig.loop.rate_hz, source="", sample_mode=hwtsp)
+                if rig.loop.report_missed_samples:
+                    step = "enabling missed-sample reporting (DAQmx_RealTime_ReportMissedSamp)"
+                    set_report_missed_samp(nidaqmx, ai, True)
+                    # from the first cycle: a late read NI's warm-up let pass would shift
+                    # every later sample index (and trip the encoder-jump rule)
+                    set_warmup_iterations(nidaqmx, ai, 0)
             step = "creating the encoder (CI) task"
             ci = self._new_task()
             chan = ci.ci_channels.add_ci_ang_encoder_chan(
@@ -157,6 +227,11 @@ class NidaqmxBackend:
                 pulses_per_rev=rig.encoder.ppr,
                 initial_angle=0.0,
             )
+            width = DIG_FILTERS[rig.encoder.dig_filter]
+            for phase in ("a", "b"):  # DAQmx coerces the width to a setting the device has
+                setattr(chan, f"ci_encoder_{phase}_input_dig_fltr_enable", width > 0.0)
+                if width > 0.0:
+                    setattr(chan, f"ci_encoder_{phase}_input_dig_fltr_min_pulse_width", width)
             if self._ci_clocked:
                 chan.ci_data_xfer_mech = (
                     c.DataTransferActiveTransferMode.POLLED
@@ -178,6 +253,22 @@ class NidaqmxBackend:
             self._writer = nidaqmx.stream_writers.AnalogMultiChannelWriter(
                 ao.out_stream, auto_start=False
             )
+            for rw in (self._ai_reader, self._ci_reader, self._writer):
+                rw.verify_array_shape = False  # one driver query less per call
+            if rig.heartbeat.enabled:
+                step = f"creating the heartbeat (DO) task on {rig.heartbeat.line}"
+                do = self._new_task()
+                do.do_channels.add_do_chan(
+                    self._phys(rig.heartbeat.line),
+                    "heartbeat",
+                    line_grouping=c.LineGrouping.CHAN_PER_LINE,
+                )
+                self._do_writer = nidaqmx.stream_writers.DigitalSingleChannelWriter(
+                    do.out_stream, auto_start=False
+                )
+                self._do_writer.verify_array_shape = False
+                do.start()  # on demand: each write sets the line at once
+                self._do_writer.write_one_sample_one_line(False, timeout=self._timeout)
             self._ao_buf[:] = rig.ao.safe_v
             try:  # the first value of the timed AO task: safe (the on-demand write already set it)
                 self._writer.write_one_sample(self._ao_buf, timeout=self._timeout)
@@ -195,6 +286,12 @@ class NidaqmxBackend:
             self._abort()
             raise DaqUnavailableError(
                 dev, (), f"NI-DAQmx driver not found ({err}); cannot open DAQ device {dev!r}"
+            ) from err
+        except nidaqmx.errors.DaqFunctionNotSupportedError as err:
+            self._abort()
+            raise DaqSetupError(
+                f"{dev}: {step} failed: {_first_line(err)} (set loop.report_missed_samples: false "
+                "to run without it; late cycles then read stale samples unreported)"
             ) from err
         except nidaqmx.errors.DaqError as err:
             self._abort()
@@ -258,7 +355,7 @@ class NidaqmxBackend:
             except nidaqmx.errors.Error as err:
                 errors.append(f"close: {_first_line(err)}")
         self._tasks.clear()
-        self._ai_reader = self._ci_reader = self._writer = None
+        self._ai_reader = self._ci_reader = self._writer = self._do_writer = None
         was_open, self.is_open = self.is_open, False
         try:
             self._write_safe_on_demand()
@@ -296,6 +393,17 @@ class NidaqmxBackend:
         self._counts = unwrap_counts(self._counts, round(raw_count), self.rig.encoder.counter_bits)
         v = self._ai_buf
         return RawSample((float(v[0]), float(v[1]), float(v[2]), float(v[3])), self._counts)
+
+    def heartbeat(self, level: bool) -> None:
+        """Set the heartbeat DO line (on demand: at once). No line configured: nothing."""
+        if self._do_writer is None:
+            return
+        try:
+            self._do_writer.write_one_sample_one_line(bool(level), timeout=self._timeout)
+        except self._nidaqmx.errors.DaqError as err:
+            raise DaqIoError(
+                f"{self.rig.device}: heartbeat write failed: DAQmx {err.error_code}: {_first_line(err)}"
+            ) from err
 
     def write(self, u_linear: float, u_rotary: float) -> None:
         """Both valve voltages (clamped to the AO range); emitted at the next clock in HW mode."""

@@ -7,6 +7,7 @@ here; :mod:`pneu_driver.daq.scaling` applies it.
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,22 +19,39 @@ from pneu_msgs_py.params.core import ParamError, from_dict, param, with_updates
 
 __all__ = [
     "ChannelMap",
+    "AiTerminals",
     "AiParams",
     "PressureSensor",
     "LaserParams",
     "EncoderParams",
     "AoParams",
+    "HeartbeatParams",
     "LoopParams",
     "RigParams",
     "AI_SENSORS",
     "DECODING_FACTOR",
+    "DIG_FILTERS",
+    "ENCODER_PFI",
     "load_rig_params",
 ]
 
 # The four analog inputs, in the order RawSample.volts carries them.
 AI_SENSORS = ("p_c1", "p_c2", "p_m1", "laser")
 DECODING_FACTOR = {"X1": 1, "X2": 2, "X4": 4}
-_TERMINALS = ("RSE", "NRSE", "DIFF", "PSEUDO_DIFF", "DEFAULT")
+# M Series AI terminal configurations (PSEUDO_DIFF is not an M Series mode)
+_TERMINALS = ("DIFF", "NRSE", "RSE")
+# PCI-6221: 16 single-ended or 8 differential inputs, aiN(+) paired with ai(N+8)(-), N = 0..7
+# (NI-DAQmx Device Considerations, "M Series Physical Channels")
+_DIFF_PAIRS = 8
+# M Series PFI digital filter settings (M Series User Manual, PFI filters table): the name is
+# the shortest pulse passed; the filter blocks pulses up to 100 ns / 6.4 us / 2.54 ms
+DIG_FILTERS = {"off": 0.0, "125ns": 125e-9, "6.425us": 6.425e-6, "2.56ms": 2.56e-3}
+# default encoder terminals per counter (M Series "Default Counter/Timer Pins"): A = SRC,
+# Z = GATE, B = AUX as DO lines (PFI0-7 = port1/line0-7, PFI8-15 = port2/line0-7)
+ENCODER_PFI = {
+    "ctr0": {"port2/line0": "PFI8 (A)", "port2/line1": "PFI9 (Z)", "port2/line2": "PFI10 (B)"},
+    "ctr1": {"port1/line3": "PFI3 (A)", "port1/line4": "PFI4 (Z)", "port2/line3": "PFI11 (B)"},
+}
 _TIMING = ("sample_clock", "on_demand")
 
 
@@ -72,8 +90,23 @@ class ChannelMap:
 
 
 @dataclass(frozen=True)
+class AiTerminals:
+    """AI terminal configuration per sensor (DIFF: aiN against ai(N+8), the sensor's 0 V not AI GND).
+
+    The pressure sensors and the laser share their 0 V with the valve supply:
+    single-ended (RSE) reads every ground-loop millivolt as signal (10 mV =
+    1 kPa or 0.32 mm), a differential input rejects it.
+    """
+
+    p_c1: str = param("DIFF", choices=_TERMINALS, desc="Huba 511 chamber 1", read_only=True)
+    p_c2: str = param("DIFF", choices=_TERMINALS, desc="Huba 511 chamber 2", read_only=True)
+    p_m1: str = param("DIFF", choices=_TERMINALS, desc="Huba 511 motor inlet", read_only=True)
+    laser: str = param("DIFF", choices=_TERMINALS, desc="HG-C1200 analog output", read_only=True)
+
+
+@dataclass(frozen=True)
 class AiParams:
-    """Analog input range and terminal configuration, shared by the four sensors."""
+    """Analog input range (shared by the four sensors) and terminal configuration per sensor."""
 
     min_v: float = param(
         -10.0,
@@ -84,12 +117,7 @@ class AiParams:
         read_only=True,
     )
     max_v: float = param(10.0, unit="V", lo=-10.0, hi=10.0, desc="AI range high", read_only=True)
-    terminal_config: str = param(
-        "RSE",
-        choices=_TERMINALS,
-        desc="AI terminal configuration (sensors powered from a supply whose 0 V is tied to AI GND: RSE; wiring unverified)",
-        read_only=True,
-    )
+    terminal: AiTerminals = param(AiTerminals)
 
     def _check(self) -> None:
         if not self.min_v < self.max_v:
@@ -169,9 +197,27 @@ class EncoderParams:
         read_only=True,
     )
 
+    dig_filter: str = param(
+        "125ns",
+        choices=tuple(DIG_FILTERS),
+        desc="digital filter on the A and B inputs: the shortest pulse passed (M Series: 125ns, "
+        "6.425us, 2.56ms or off); see max_filtered_rpm",
+        read_only=True,
+    )
+
     @property
     def counts_per_rev(self) -> int:
         return self.ppr * DECODING_FACTOR[self.decoding]
+
+    @property
+    def max_filtered_rpm(self) -> float:
+        """The highest speed whose quadrature edges the digital filter still passes [rpm].
+
+        E6B2-C: phase A leads B by T/4 ± T/8 (Omron E6B2-C datasheet, timing chart), so
+        the closest A and B edges are T/8 apart: 8 · width < 60 / (rpm · ppr).
+        """
+        width = DIG_FILTERS[self.dig_filter]
+        return math.inf if width == 0.0 else 60.0 / (8.0 * width * self.ppr)
 
 
 @dataclass(frozen=True)
@@ -199,6 +245,32 @@ class AoParams:
             raise ParamError("max_v", self.max_v, f"greater than min_v = {self.min_v:g} V")
         if not self.min_v <= self.safe_v <= self.max_v:
             raise ParamError("safe_v", self.safe_v, f"[{self.min_v:g}, {self.max_v:g}] V")
+
+
+@dataclass(frozen=True)
+class HeartbeatParams:
+    """A digital output toggled once per cycle by the loop, for an external missing-pulse relay.
+
+    The relay (in series with the e-stop) holds the supply air on while it sees
+    edges; a hung, killed or stopped loop, or a tripped supervisor, leaves the
+    line still and the relay drops the supply (README, "Safety on the real rig").
+    """
+
+    enabled: bool = param(True, desc="toggle the line every cycle", read_only=True)
+    line: str = param(
+        "port0/line0",
+        desc="DO line on the device (M Series: port0/line0-7 or a PFI line port1/2 not used by the encoder)",
+        read_only=True,
+    )
+    stop_on_trip: bool = param(
+        True,
+        desc="stop toggling while the supervisor has a latched fault or the e-stop (the relay drops the supply)",
+        read_only=True,
+    )
+
+    def _check(self) -> None:
+        if not re.fullmatch(r"port\d+/line\d+", self.line):
+            raise ParamError("line", self.line, "a DO line such as port0/line0")
 
 
 @dataclass(frozen=True)
@@ -282,6 +354,21 @@ class LoopParams:
     stats_window: int = param(
         60000, lo=100, hi=10_000_000, desc="cycles kept for jitter percentiles"
     )
+    report_missed_samples: bool = param(
+        True,
+        desc="hardware timing: DAQmx Read reports missed sample clocks (DAQmx_RealTime_ReportMissedSamp); "
+        "off, a late cycle reads a stale sample without an error",
+        read_only=True,
+    )
+    switch_interval_us: float = param(
+        200.0,
+        unit="us",
+        lo=0.0,
+        hi=5000.0,
+        desc="Python's GIL switch interval while the loop runs (sys.setswitchinterval; default 5000 us "
+        "lets another thread hold the loop off for 5 ms); 0: leave it",
+        read_only=True,
+    )
 
     def _check(self) -> None:
         period_us = 1e6 / self.rate_hz
@@ -322,11 +409,44 @@ class RigParams:
     laser: LaserParams = param(LaserParams)
     encoder: EncoderParams = param(EncoderParams)
     ao: AoParams = param(AoParams)
+    heartbeat: HeartbeatParams = param(HeartbeatParams)
     loop: LoopParams = param(LoopParams)
 
     def _check(self) -> None:
         if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_\-]*", self.device):
             raise ParamError("device", self.device, "a DAQmx device name such as Dev1")
+        self._check_diff_pairs()
+        pins = ENCODER_PFI.get(self.channels.encoder, {})
+        if self.heartbeat.enabled and self.heartbeat.line in pins:
+            raise ParamError(
+                "heartbeat.line",
+                self.heartbeat.line,
+                f"a DO line not wired to {self.channels.encoder}'s encoder input "
+                f"{pins[self.heartbeat.line]} (e.g. port0/line0)",
+            )
+
+    def _check_diff_pairs(self) -> None:
+        """DIFF uses aiN and ai(N+8): N must be 0..7 and ai(N+8) free for it."""
+        used = {getattr(self.channels, name): name for name in AI_SENSORS}
+        for name in AI_SENSORS:
+            if getattr(self.ai.terminal, name) != "DIFF":
+                continue
+            chan = getattr(self.channels, name)
+            n = int(chan[2:])
+            if n >= _DIFF_PAIRS:
+                raise ParamError(
+                    f"channels.{name}",
+                    chan,
+                    f"ai0..ai{_DIFF_PAIRS - 1} with ai.terminal.{name}: DIFF (aiN pairs with ai(N+8)), "
+                    "or terminal NRSE/RSE",
+                )
+            neg = f"ai{n + _DIFF_PAIRS}"
+            if neg in used:
+                raise ParamError(
+                    f"channels.{used[neg]}",
+                    neg,
+                    f"a channel other than {neg}: it is the (-) input of {name} ({chan}, DIFF)",
+                )
 
     @property
     def period_s(self) -> float:

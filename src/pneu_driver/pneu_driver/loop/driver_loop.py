@@ -12,12 +12,21 @@ One cycle (DESIGN §3, k = tick, T = 1 ms):
    holds them and writes them at the deadline of tick k+1, just before reading
    sample k+1 -- a one-sample transport delay either way.
 
+5. the heartbeat DO line toggles (``heartbeat.enabled``), unless the
+   supervisor has tripped (``heartbeat.stop_on_trip``): an external
+   missing-pulse relay keeps the supply air on only while it sees edges.
+
 Deadlines are absolute (t0 + k·T), so errors never accumulate; a cycle that
 starts more than a whole period late skips the missed ticks (counted). DAQmx
-late errors (-209800/-209801/-209802) are counted as late cycles and the loop
-goes on; ``max_consecutive_late`` in a row stop it. Whatever ends the loop
-(``stop()``, ``n_cycles``, an exception), ``finally`` writes the safe value and
-closes the backend.
+late errors (:data:`~pneu_driver.daq.nidaqmx_backend.LATE_CODES`) are counted
+as late cycles (per code in ``late_codes``) and the loop goes on;
+``max_consecutive_late`` in a row stop it. Whatever ends the loop (``stop()``,
+``n_cycles``, an exception), ``finally`` writes the safe value, leaves the
+heartbeat low (no more edges) and closes the backend.
+
+``LoopStats`` also keeps each cycle's cost: from the sample's arrival (the
+read's return; software pacing: the cycle's start) to the end of its write and
+heartbeat -- the work the loop does per period, waiting for commands included.
 
 Threads: ``run`` owns the backend and the loop; ``put_command``, ``stop``,
 ``estop``, ``reset``, ``acknowledge`` and ``status`` may be called from any
@@ -27,13 +36,10 @@ thread. Callbacks run in the loop thread and must be quick.
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from collections.abc import Callable, Iterable
-from typing import Any
 
-import numpy as np
 from pneu_msgs_py.contract.samples import AXES, SensorSample
 
 from pneu_driver.daq.backend import DaqBackend
@@ -41,6 +47,7 @@ from pneu_driver.daq.errors import DriverError, LateCycleError
 from pneu_driver.daq.rig import RigParams
 from pneu_driver.daq.scaling import RawSample, Scaler
 from pneu_driver.loop.rt import enable_realtime
+from pneu_driver.loop.stats import LoopStats
 from pneu_driver.safety import SAFE_V, AxisStatus, SafetyEvent, SafetySupervisor
 
 __all__ = ["CommandSlot", "LoopStats", "DriverLoop"]
@@ -89,83 +96,6 @@ class CommandSlot:
             out = [(a, u, s) for a, (u, s) in self._pending.items()]
             self._pending.clear()
         return out
-
-
-class LoopStats:
-    """Cycle timing of one run. ``lateness`` = cycle start − deadline [ns].
-
-    Software pacing: the start against the absolute deadline t0 + k·T.
-    Hardware pacing: the read's return against the previous one + T (the
-    clock itself is exact; this is the software's jitter around it).
-    A cycle is on time when |lateness| ≤ ``tol_ns``; skipped ticks count as
-    not on time.
-    """
-
-    def __init__(self, window: int, tol_ns: int):
-        self.tol_ns = int(tol_ns)
-        self.cycles = 0
-        self.on_time = 0
-        self.late_cycles = 0  # started beyond tol, or a DAQmx late error
-        self.missed_ticks = 0  # ticks skipped entirely
-        self.daq_late_errors = 0
-        self.max_lateness_ns = 0
-        self._ring = np.zeros(int(window), dtype=np.int64)
-        self._n = 0
-        self._last_on_time = False
-
-    def record(self, lateness_ns: int, late: bool = False) -> None:
-        """One cycle's start lateness; ``late`` forces it late (a DAQmx late error)."""
-        ring = self._ring
-        ring[self._n % ring.shape[0]] = lateness_ns
-        self._n += 1
-        self.cycles += 1
-        mag = abs(lateness_ns)
-        self._last_on_time = mag <= self.tol_ns and not late
-        if self._last_on_time:
-            self.on_time += 1
-        else:
-            self.late_cycles += 1
-        if mag > self.max_lateness_ns:
-            self.max_lateness_ns = mag
-
-    def mark_late(self) -> None:
-        """The last recorded cycle turned out late (a DAQmx late error on its write)."""
-        if self._last_on_time:
-            self._last_on_time = False
-            self.on_time -= 1
-            self.late_cycles += 1
-
-    def lateness_ns(self) -> np.ndarray:
-        """The most recent lateness values (up to the window), oldest first."""
-        n, w = self._n, self._ring.shape[0]
-        if n <= w:
-            return self._ring[:n].copy()
-        i = n % w
-        return np.concatenate((self._ring[i:], self._ring[:i]))
-
-    @property
-    def on_time_ratio(self) -> float:
-        total = self.cycles + self.missed_ticks
-        return self.on_time / total if total else math.nan
-
-    def jitter_us(self, q: float = 99.0) -> float:
-        """The q-th percentile of |lateness| over the window [µs]."""
-        lat = self.lateness_ns()
-        if lat.size == 0:
-            return math.nan
-        return float(np.percentile(np.abs(lat), q)) * 1e-3
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "cycles": self.cycles,
-            "on_time": self.on_time,
-            "late_cycles": self.late_cycles,
-            "missed_ticks": self.missed_ticks,
-            "daq_late_errors": self.daq_late_errors,
-            "on_time_ratio": self.on_time_ratio,
-            "jitter_us_p99": self.jitter_us(99.0),
-            "max_lateness_us": self.max_lateness_ns * 1e-3,
-        }
 
 
 class DriverLoop:
@@ -217,6 +147,12 @@ class DriverLoop:
             raise ValueError(
                 f"safety counts_per_rev: {supervisor.params.counts_per_rev} refused; allowed: the rig's encoder counts per revolution {rig.encoder.counts_per_rev}"
             )
+        if rig.encoder.max_filtered_rpm < supervisor.params.max_speed_rpm:
+            raise ValueError(
+                f"encoder.dig_filter: {rig.encoder.dig_filter!r} refused; allowed: a filter passing "
+                f"the overspeed trip {supervisor.params.max_speed_rpm:g} rpm (this one loses counts above "
+                f"{rig.encoder.max_filtered_rpm:.0f} rpm at {rig.encoder.ppr} P/R)"
+            )
         if rig.ao.safe_v != SAFE_V:
             raise ValueError(
                 f"ao.safe_v: {rig.ao.safe_v} refused; allowed: {SAFE_V} V (the supervisor's safe value)"
@@ -245,6 +181,11 @@ class DriverLoop:
         self.error: BaseException | None = None
         self.last_sample: SensorSample | None = None
         self.realtime_notes: list[str] = []
+        hb = rig.heartbeat
+        self._hb_on = hb.enabled
+        self._hb_stop_on_trip = hb.stop_on_trip
+        self._hb_level = False
+        self._tripped = False  # the supervisor's latch, read under the lock once per cycle
 
     # ------------------------------------------------------------ any thread
     def put_command(self, axis: str, u: float, stamp_ns: int) -> bool:
@@ -308,7 +249,10 @@ class DriverLoop:
         if n_cycles is not None and n_cycles < 0:
             raise ValueError(f"n_cycles: {n_cycles!r} refused; allowed: an integer ≥ 0 or None")
         stop = stop_event or self._stop  # a stop() before run() ends it at once
-        notes, restore_rt = enable_realtime(self.rig.loop.rt_priority, self.rig.loop.timerslack_ns)
+        lp = self.rig.loop
+        notes, restore_rt = enable_realtime(
+            lp.rt_priority, lp.timerslack_ns, lp.switch_interval_us * 1e-6
+        )
         self.realtime_notes = notes
         try:
             self.backend.open()  # leaves the valves safe; cleans up after itself if it fails
@@ -351,9 +295,12 @@ class DriverLoop:
                 late -= skip * T
                 stats.missed_ticks += skip
             stats.record(late)
+            start = deadline + late
             backend.write(*pending)  # the command computed from sample k-1, at tick k
             raw = backend.read()
             pending = self._cycle(k, raw, deadline)
+            self._beat()
+            stats.record_cost(clock() - start)
             k += 1
             cycles += 1
 
@@ -362,15 +309,21 @@ class DriverLoop:
         max_late = self.rig.loop.max_consecutive_late
         k = -1
         t_prev: int | None = None
+        # the sample clock's phase on our clock: min over clock-paced reads of (return - k·T)
+        # (a read never returns before its clock); may rise by 100 ppm of T per cycle (drift)
+        anchor: int | None = None
+        drift = T // 10_000
         consecutive = 0
         cycles = 0
         while not self._stopped(stop) and (n_cycles is None or cycles < n_cycles):
             raw: RawSample | None
+            at_least = 0  # clocks DAQmx says were missed
             try:
                 raw = backend.read()  # blocks until the next sample clock
             except LateCycleError as err:
                 raw = None
-                stats.daq_late_errors += 1
+                at_least = err.min_missed
+                stats.daq_late(err.codes)
                 consecutive += 1
                 if consecutive >= max_late:
                     raise DriverError(
@@ -378,19 +331,24 @@ class DriverLoop:
                     ) from err
             now = clock()
             step = 1
-            if (
-                raw is None and t_prev is not None
-            ):  # missed clock(s): how many, from the elapsed time
-                step = max(1, round((now - t_prev) / T))
+            if raw is None and t_prev is not None:
+                # missed clock(s): a late read returns the newest sample at once, so its clock
+                # is the last one before now on the clock's phase; at least what DAQmx says
+                est = round((now - t_prev) / T) if anchor is None else (now - anchor) // T - k
+                step = max(1 + at_least, est)
             stats.record(0 if t_prev is None else now - t_prev - step * T, late=raw is None)
             stats.missed_ticks += step - 1
             k += step
             t_prev = now
+            if raw is not None:
+                a = now - k * T
+                anchor = a if anchor is None or a < anchor + drift else anchor + drift
             if raw is None:
                 stamp = self._epoch_ns + k * T
                 with self._lock:
                     out = self._sup.outputs(stamp + T)  # the watchdog still runs
                     events = self._sup.events()
+                    self._tripped = self._sup.tripped
                 if events and self._on_events is not None:
                     self._on_events(events)
             else:
@@ -398,9 +356,11 @@ class DriverLoop:
                 out = self._cycle(k, raw, now)
             try:
                 backend.write(*out)  # HW AO: emitted at clock k+1
-            except LateCycleError:
-                stats.daq_late_errors += 1
+            except LateCycleError as err:
+                stats.daq_late(err.codes)
                 stats.mark_late()
+            self._beat()
+            stats.record_cost(clock() - now)
             cycles += 1
 
     def _cycle(self, k: int, raw: RawSample, tick_ns: int) -> tuple[float, float]:
@@ -423,9 +383,18 @@ class DriverLoop:
                 sup.command(axis, u, st)
             out = sup.outputs(stamp + T)
             events = sup.events()
+            self._tripped = sup.tripped
         if events and self._on_events is not None:
             self._on_events(events)
         return out
+
+    def _beat(self) -> None:
+        """Toggle the heartbeat line: this cycle's outputs are written (not while tripped)."""
+        if not self._hb_on or (self._hb_stop_on_trip and self._tripped):
+            return
+        self._hb_level = not self._hb_level
+        self.backend.heartbeat(self._hb_level)
+        self.stats.heartbeats += 1
 
     def _wait_until(self, deadline: int) -> None:
         """Sleep until ``spin_us`` before the deadline, then spin on the clock."""
@@ -437,11 +406,19 @@ class DriverLoop:
             pass
 
     def _shutdown(self, raise_errors: bool) -> None:
-        """Safe value, then close (the backend writes it once more on close)."""
+        """Safe value, heartbeat low (no more edges), then close (the backend writes 5 V once more)."""
         try:
             self.backend.write(SAFE_V, SAFE_V)
+        except LateCycleError:
+            pass  # written, one clock late; close() writes it once more on demand
         except Exception as err:
             log.error("writing the safe value at shutdown failed: %s", err)
+        if self._hb_on:
+            try:
+                self._hb_level = False
+                self.backend.heartbeat(False)
+            except Exception as err:
+                log.error("setting the heartbeat line low at shutdown failed: %s", err)
         try:
             self.backend.close()
         except Exception as err:

@@ -1,4 +1,4 @@
-"""Best-effort real-time settings for the calling thread (Linux): SCHED_FIFO and timer slack.
+"""Best-effort real-time settings for the calling thread (Linux): SCHED_FIFO, timer slack, GIL switch interval.
 
 Used by the driver loop when ``loop.rt_priority`` > 0. Nothing here is
 required: without the privilege (root, CAP_SYS_NICE or an rtprio limit) the
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import sys
 from collections.abc import Callable
 
 __all__ = ["enable_realtime"]
@@ -25,15 +26,28 @@ def _prctl() -> Callable[..., int] | None:
         return None
 
 
-def enable_realtime(priority: int, timerslack_ns: int = 1) -> tuple[list[str], Callable[[], None]]:
-    """Apply SCHED_FIFO at ``priority`` (0: leave the policy) and the timer slack to this thread.
+def enable_realtime(
+    priority: int, timerslack_ns: int = 1, switch_interval_s: float = 0.0
+) -> tuple[list[str], Callable[[], None]]:
+    """Apply SCHED_FIFO at ``priority`` (0: leave the policy) and the timer slack to this thread,
+    and the GIL switch interval to the process (``switch_interval_s`` > 0).
 
     Returns (what was applied or why not, one line each; an undo function
     restoring the previous settings). Linux's default timer slack (50 µs) is
-    added to every sleep; 1 ns makes ``time.sleep`` wake when asked.
+    added to every sleep; 1 ns makes ``time.sleep`` wake when asked. A thread
+    waiting for the GIL asks its holder to drop it only after the switch
+    interval (Python's default 5 ms), so a busy executor thread can hold the
+    loop off a whole sample clock or five.
     """
     notes: list[str] = []
     undo: list[Callable[[], None]] = []
+    if switch_interval_s > 0.0:
+        old_si = sys.getswitchinterval()
+        sys.setswitchinterval(switch_interval_s)
+        notes.append(
+            f"GIL switch interval {switch_interval_s * 1e6:g} us (was {old_si * 1e6:g} us)"
+        )
+        undo.append(lambda: sys.setswitchinterval(old_si))
     prctl = _prctl()
     if timerslack_ns > 0 and prctl is not None:
         old = prctl(_PR_GET_TIMERSLACK, 0, 0, 0, 0)

@@ -1,4 +1,4 @@
-"""``ros2 run pneu_driver driver_node``: the rig through nidaqmx (rclpy shell).
+"""``ros2 run pneu_driver driver_node``: the rig through nidaqmx, or the twin as a simulated card (rclpy shell).
 
 The 1 kHz loop (:class:`pneu_driver.loop.driver_loop.DriverLoop` around
 :class:`pneu_driver.daq.nidaqmx_backend.NidaqmxBackend` and the
@@ -8,7 +8,9 @@ samples, hands the controllers' commands to it, serves ``~/estop`` and
 ``~/reset`` and reports ``/diagnostics``. The backend writes 5 V (valves
 closed) before the tasks start; the loop's ``finally`` writes it again on
 stop or on any exception. No DAQ -> one line naming the device and the
-devices visible, exit status 1.
+devices visible, exit status 1. ``backend: sim`` runs the same loop on the
+twin as a simulated PCI-6221 (:mod:`pneu_sim.daq_sim`, found by name): a
+rehearsal of the rig without hardware.
 """
 
 from __future__ import annotations
@@ -39,7 +41,8 @@ from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, JointState
 from std_srvs.srv import Trigger
 
-from pneu_driver.daq.nidaqmx_backend import NidaqmxBackend, visible_devices
+from pneu_driver.daq.backends import backend_kind, make_backend
+from pneu_driver.daq.nidaqmx_backend import visible_devices
 from pneu_driver.daq.rig import load_rig_params
 from pneu_driver.loop.driver_loop import DriverLoop
 from pneu_driver.safety import load_safety_params
@@ -73,6 +76,15 @@ class DriverNode(ShellDefaults, Node):
             ),
         )
         self.declare_parameter(
+            "backend",
+            "nidaqmx",
+            ParameterDescriptor(
+                description="the DAQ: nidaqmx (the PCI-6221) or sim[:seed=,plant=,card=,stall_at_s=,stall_ms=] "
+                "(the twin as a simulated card, pneu_sim)",
+                **ro,
+            ),
+        )
+        self.declare_parameter(
             "axes",
             "both",
             ParameterDescriptor(
@@ -87,11 +99,13 @@ class DriverNode(ShellDefaults, Node):
             raise ParamError("axes", axes, "one of " + ", ".join(choices))
         rig = load_rig_params(self.get_parameter("rig_file").value or None)
         safety = load_safety_params(self.get_parameter("safety_file").value or None)
-        seen = visible_devices(rig.device)  # DaqUnavailableError without the NI driver
-        if rig.device not in seen:
-            from pneu_driver.daq.errors import DaqUnavailableError
+        backend = self.get_parameter("backend").value
+        if backend_kind(backend) == "nidaqmx":
+            seen = visible_devices(rig.device)  # DaqUnavailableError without the NI driver
+            if rig.device not in seen:
+                from pneu_driver.daq.errors import DaqUnavailableError
 
-            raise DaqUnavailableError(rig.device, seen)
+                raise DaqUnavailableError(rig.device, seen)
         from pneu_driver.safety import SafetySupervisor
 
         self.wire = SensorWire()
@@ -108,7 +122,7 @@ class DriverNode(ShellDefaults, Node):
             DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
         )
         self.loop = DriverLoop(
-            NidaqmxBackend(rig),
+            make_backend(backend, rig),
             rig,
             SafetySupervisor(safety, sample_time_s=rig.period_s),
             on_sample=self._publish_sample,  # loop thread
@@ -133,7 +147,9 @@ class DriverNode(ShellDefaults, Node):
         self.events: collections.deque = collections.deque(maxlen=10000)
         self.stamp_offset_ns: int | None = None
         self.thread: threading.Thread | None = None
-        self.device = rig.device
+        self.device = (
+            rig.device if backend_kind(backend) == "nidaqmx" else f"{backend} ({rig.device})"
+        )
 
     def start(self) -> None:
         self.thread = self.loop.start(name="pneu_driver_loop")
@@ -157,8 +173,14 @@ class DriverNode(ShellDefaults, Node):
         ):  # ROS clock at the first sample vs its stamp (epoch estimate)
             self.stamp_offset_ns = self.get_clock().now().nanoseconds - s.stamp_ns
         pubs = self.pubs
-        for topic, data in self.wire.encode(s):
-            pubs[topic].publish(data)
+        try:
+            for topic, data in self.wire.encode(s):
+                pubs[topic].publish(data)
+        except Exception:
+            if self.context.ok():
+                raise
+            self.loop.stop()  # Ctrl-C shut rclpy down first: stop quietly, the valves go safe
+            return
         for h in self.hosts:  # one-process deployment: the controllers answer at once
             if h.axis in self.crashed:
                 continue

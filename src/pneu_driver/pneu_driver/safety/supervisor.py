@@ -495,6 +495,11 @@ class SafetySupervisor:
         return out
 
     @property
+    def tripped(self) -> bool:
+        """True while the e-stop or any axis's fault is latched (the heartbeat stops)."""
+        return self._estop is not None or bool(self._latched["linear"] or self._latched["rotary"])
+
+    @property
     def estopped(self) -> str | None:
         """The e-stop reason while latched, else None."""
         return self._estop

@@ -195,7 +195,13 @@ class SimNode(ShellDefaults, Node):
 
     def _realtime_sample(self, s) -> None:
         """Realtime loop thread: publish sample k; hosted controllers answer it at once."""
-        self._publish_sample(s)
+        try:
+            self._publish_sample(s)
+        except Exception:
+            if self.context.ok():
+                raise
+            self.loop.stop_event.set()  # Ctrl-C shut rclpy down first: stop quietly
+            return
         for h in self.hosts:
             if h.axis in self.crashed:
                 continue

@@ -1,0 +1,114 @@
+"""``pneu rig``: the driver's 1 kHz loop with the controllers in it, on the rig or the simulated card."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from pneu_control.experiment import session
+
+NAME = "rig"
+HELP = (
+    "run the driver loop with the controllers in it, no ROS: --backend nidaqmx (the PCI-6221) "
+    "or sim[:seed=,card=,stall_at_s=,stall_ms=] (the twin as a simulated card, a rehearsal)"
+)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--backend",
+        required=True,
+        metavar="KIND[:key=value,...]",
+        help="nidaqmx (the rig: valves move!) or sim, e.g. sim:seed=1,stall_at_s=2,stall_ms=3",
+    )
+    p.add_argument("--axis", choices=("linear", "rotary", "both"), default="linear")
+    p.add_argument("--controller", default=None, help="pid, ladrc, eso_smc, eso_smc_plus")
+    p.add_argument("--reference", default=None, metavar="KIND[:key=value,...]")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--controllers", default=None, metavar="FILE", help="controllers.yaml")
+    p.add_argument(
+        "--duration", type=float, default=10.0, metavar="S", help="seconds (0: until Ctrl-C)"
+    )
+    p.add_argument("--rig", default=None, metavar="FILE", help="rig.yaml (default: config/)")
+    p.add_argument("--safety", default=None, metavar="FILE", help="safety.yaml")
+    p.add_argument("--out", default=None, metavar="DIR", help="write run.mcap and loop.json here")
+    p.add_argument(
+        "--hold",
+        default="",
+        metavar="AXIS=V[,AXIS=V]",
+        help="command these valves a constant voltage instead of a controller (bring-up: "
+        "neutral trim), e.g. linear=5.05",
+    )
+
+
+def parse_hold(text: str) -> dict[str, float]:
+    """``linear=5.05,rotary=5`` -> ``{"linear": 5.05, "rotary": 5.0}`` (0-10 V, each axis once)."""
+    from pneu_msgs_py.contract.samples import AXES, U_MAX_V, U_MIN_V
+    from pneu_msgs_py.params.core import ParamError
+    from pneu_msgs_py.params.spec import parse_spec
+
+    if not text:
+        return {}
+    _, values = parse_spec("hold:" + text, "--hold")
+    out = {}
+    for axis, v in values.items():
+        if axis not in AXES:
+            raise ParamError("--hold", axis, "one of " + ", ".join(AXES))
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not U_MIN_V <= v <= U_MAX_V:
+            raise ParamError(f"--hold {axis}", v, f"[{U_MIN_V:g}, {U_MAX_V:g}] V")
+        out[axis] = float(v)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from pneu_driver.daq.rig import load_rig_params
+
+    from pneu_control.experiment.rig_run import run_rig
+
+    if args.duration < 0:
+        raise ValueError(
+            f"--duration: {args.duration!r} refused; allowed: >= 0 s (0: until Ctrl-C)"
+        )
+    axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
+    hold = parse_hold(args.hold)
+    spec = session.build_spec(
+        axes=tuple(a for a in axes if a not in hold) or axes,
+        controller=args.controller,
+        reference=args.reference,
+        sets=args.set,
+        duration_s=args.duration or 1.0,
+        controllers_file=args.controllers,
+        name="rig",
+        safety_file=args.safety,
+    )
+    rig = load_rig_params(args.rig)
+    echo = session.config_echo(spec) | {"backend": args.backend}
+    print(f"pneu rig: backend {args.backend}, axes {', '.join(axes)}", file=sys.stderr)
+    with session.sigterm_as_interrupt():
+        result = run_rig(
+            args.backend,
+            spec,
+            rig,
+            duration_s=args.duration or None,
+            out_dir=args.out,
+            echo=echo | {"hold": hold},
+            hold=hold,
+        )
+    d = result.diagnostics
+    if result.error is not None and d["cycles"] == "0":  # the DAQ never opened
+        print(f"pneu rig: error: {result.error}", file=sys.stderr)
+        return 1
+    print(
+        f"cycles {d['cycles']}  late {d['late_cycles']}  missed ticks {d['missed_ticks']}  "
+        f"DAQmx late {d['daq_late_errors']} ({d['daq_late_codes'] or '-'})  "
+        f"cost p50 {float(d['cost_us_p50']):.0f} us  p99 {float(d['cost_us_p99']):.0f} us  "
+        f"heartbeats {d['heartbeats']}"
+    )
+    for axis in dict.fromkeys((*axes, *hold)):
+        print(f"safety  {axis:7s} {d[f'{axis}.state']} {d[f'{axis}.causes']}")
+    if result.bag is not None:
+        print(f"wrote {result.bag}", file=sys.stderr)
+    if result.error is not None:
+        print(f"pneu rig: error: {result.error}", file=sys.stderr)
+        return 1
+    return 0
