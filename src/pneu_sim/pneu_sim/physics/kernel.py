@@ -278,6 +278,15 @@ def vane_factor(prm, theta):
 
 
 @njit(**_JIT)
+def vane_factors(prm, theta):
+    """:func:`vane_factor` at each angle of the array ``theta`` (one call from Python)."""
+    out = np.empty(theta.shape[0])
+    for i in range(theta.shape[0]):
+        out[i] = vane_factor(prm, theta[i])
+    return out
+
+
+@njit(**_JIT)
 def stick_slip(v, F, m, F_c, F_s, v_s, c_v, h):
     """One semi-implicit Euler step of m v̇ = F − F_f(v) with Karnopp sticking.
 
