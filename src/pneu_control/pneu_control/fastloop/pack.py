@@ -28,7 +28,7 @@ from pneu_control.controller.references import (
 from pneu_control.fastloop import layout as L
 from pneu_control.observers.td import TrackingDifferentiator
 
-__all__ = ["Packed", "pack_spec", "unsupported"]
+__all__ = ["Packed", "pack_algorithm", "pack_reference", "pack_spec", "unsupported"]
 
 
 @dataclass
@@ -57,7 +57,7 @@ def unsupported(spec: Any) -> str | None:
     return None
 
 
-def _reference(ref: Any, cp: np.ndarray, ci: np.ndarray) -> list[list[float]]:
+def pack_reference(ref: Any, cp: np.ndarray, ci: np.ndarray) -> list[list[float]]:
     """Fill the reference slots; returns the waypoint rows (t, r, v, a) or []."""
     if isinstance(ref, Sine):
         ci[L.CI_REF_KIND] = L.REF_SINE
@@ -80,7 +80,7 @@ def _reference(ref: Any, cp: np.ndarray, ci: np.ndarray) -> list[list[float]]:
     return []
 
 
-def _algorithm(alg: Any, cp: np.ndarray, ci: np.ndarray) -> list[list[float]]:
+def pack_algorithm(alg: Any, cp: np.ndarray, ci: np.ndarray) -> list[list[float]]:
     """Fill the algorithm's constants and options; returns the valve table rows or []."""
     name = alg.name
     ci[L.CI_ALG] = L.ALG_CODES[name]
@@ -220,9 +220,9 @@ def pack_spec(spec: Any, sup: Any | None, scaling: Any | None) -> Packed:
         ci[a, L.CI_ANGLE] = axis == "rotary" and params.rotary_model == "angle"
         ci[a, L.CI_TD_ON] = params.td.enabled
         ci[a, L.CI_DELAY] = params.transport_delay_samples
-        waypoints[a] = _reference(make_reference(params.reference, axis, T), cp[a], ci[a])
+        waypoints[a] = pack_reference(make_reference(params.reference, axis, T), cp[a], ci[a])
         alg = make_algorithm(params, axis)
-        valves[a] = _algorithm(alg, cp[a], ci[a])
+        valves[a] = pack_algorithm(alg, cp[a], ci[a])
         for slot, attr in _STATE:
             cs[a, slot] = getattr(alg, attr, math.nan)
         for i, u in enumerate(getattr(alg, "ff_pipe", ())):
