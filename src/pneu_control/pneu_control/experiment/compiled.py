@@ -20,9 +20,13 @@ injected faults; a run where the plant gives a non-finite sample or a controller
 answers NaN (found while running: the run is redone in Python). No bag, no
 progress callback, no Ctrl-C inside the compiled call.
 
-Many runs in one process: the first call loads the loop from numba's cache (or
-compiles it, about a minute); :func:`warm_up` does that up front (per worker
-process), every later call costs the simulation only.
+Many runs: the first call in a process loads the loop from numba's cache (or
+compiles it: about a minute, once per source change); :func:`warm_up` does that up
+front. For a pool of worker processes, call :func:`warm_up` in the parent first (the
+cache is then on disk: each worker loads it in under a second instead of compiling
+it), then ``warm_up()`` in each worker's initializer; every later call costs the
+simulation only. The result's arrays are views of one (N, 33) record array
+(≈ 5 MB for 20 s): keep the metrics, not the results, across thousands of runs.
 """
 
 from __future__ import annotations
