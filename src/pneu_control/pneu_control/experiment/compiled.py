@@ -87,6 +87,7 @@ def run_compiled(
     from pneu_control.fastloop import layout as L
     from pneu_control.fastloop.loop import closed_loop
     from pneu_control.fastloop.pack import pack_spec
+    from pneu_control.fastloop.supervisor import sup_new
 
     reason = compiled_support(spec)
     if reason is not None:
@@ -114,7 +115,7 @@ def run_compiled(
     t_wall = time.perf_counter()
     status, k_stop, last_event = closed_loop(
         n, t_ns, st, prm, noise, out, p.active, p.cp, p.ci, p.cs, p.wp, p.vt, p.sup_on, p.sp,
-        p.si, rec,
+        p.si, (*sup_new(p.si), np.empty(4)), rec,
     )  # fmt: skip
     wall = time.perf_counter() - t_wall
     if status != L.OK:

@@ -15,8 +15,11 @@ Supervisor: ``sp`` float64[N_SP] thresholds, ``si`` int64[N_SI] integer threshol
 from __future__ import annotations
 
 # how every compiled mirror is built: no fastmath (no FMA contraction, no reassociation), no
-# division checks. Not cached: only the loop (pneu_control.fastloop.loop) is, as one unit.
-JIT = {"error_model": "numpy"}
+# division checks, and no NRT (numba's reference counting: with it every call that passes
+# an array does an atomic incref/decref pair, measured at ~17 % of the loop; without it
+# nothing may allocate an array inside, the caller allocates). Not cached: only the loop
+# (pneu_control.fastloop.loop) is, as one unit.
+JIT = {"error_model": "numpy", "_nrt": False}
 
 # ---------------------------------------------------------------- algorithms, references
 ALG_PID, ALG_LADRC, ALG_ESO_SMC, ALG_ESO_SMC_PLUS = 0, 1, 2, 3

@@ -42,7 +42,6 @@ from pneu_control.fastloop.supervisor import (
     SN_EVENT,
     sup_check_sample,
     sup_command,
-    sup_new,
     sup_outputs,
 )
 
@@ -52,19 +51,21 @@ _NEUTRAL_V = 5.0  # pneu_msgs_py.contract.samples.NEUTRAL_V: inactive axes, star
 
 
 @njit(cache=True, **JIT)
-def closed_loop(n, T_ns, st, prm, noise, out, active, cp, ci, cs, wp, vt, sup_on, sp, si, rec):
+def closed_loop(
+    n, T_ns, st, prm, noise, out, active, cp, ci, cs, wp, vt, sup_on, sp, si, sup_state, rec
+):
     """Run n cycles from the plant state ``st`` whose sample s_0 is in ``out``.
 
     ``noise[k]``: the plant's noise row for step k (as :meth:`Plant.step` draws it).
-    ``active[a]``: axis a (0 linear, 1 rotary) has a controller. ``rec`` float64[n, N_REC]:
-    one row per cycle (layout: ``REC_*`` in :mod:`.layout`; the axis columns are
-    written only for active axes).
+    ``active[a]``: axis a (0 linear, 1 rotary) has a controller. ``sup_state``: the
+    supervisor's fresh state (:func:`.supervisor.sup_new`) and 4 floats of scratch for
+    the raw volts. ``rec`` float64[n, N_REC]: one row per cycle (layout: ``REC_*`` in
+    :mod:`.layout`; the axis columns are written only for active axes).
     Returns (status, k, last_event): status :data:`~.layout.OK` or why the loop stopped
     at cycle k; ``last_event`` the last cycle (n = the final check) at which the Python
     supervisor emits an event or counts something (−1: none).
     """
-    sf, sn, xw_t, xw_x, cw_t, cw_c = sup_new(si)
-    volts = np.empty(4)
+    sf, sn, xw_t, xw_x, cw_t, cw_c, volts = sup_state
     hold_l = _NEUTRAL_V
     hold_r = _NEUTRAL_V
     last_event = -1
@@ -72,7 +73,7 @@ def closed_loop(n, T_ns, st, prm, noise, out, active, cp, ci, cs, wp, vt, sup_on
     pa = sp[SP_P_A]
     vpm = sp[SP_V_PER_M]
     vmid = sp[SP_V_MID]
-    # one view per axis, made once (a view made per cycle costs a reference count each)
+    # one view per axis, made once
     cp0, ci0, cs0, wp0, vt0 = cp[0], ci[0], cs[0], wp[0], vt[0]
     cp1, ci1, cs1, wp1, vt1 = cp[1], ci[1], cs[1], wp[1], vt[1]
     act0 = active[0]

@@ -86,19 +86,17 @@ SN_FT = 25  # 4 channels: since when the value is frozen
 N_SN = 29
 
 
-@njit(**JIT)
-def sup_new(si):
-    """Fresh state: (sf, sn, x window stamps, x window values, count window stamps, counts)."""
+def sup_new(si: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Fresh state (plain numpy, allocated by the caller: the loop runs without NRT):
+    (sf, sn, x window stamps, x window values, count window stamps, counts)."""
     sf = np.zeros(N_SF)
-    for i in range(4):
-        sf[SF_FV + i] = math.nan  # never equal: every channel starts fresh
+    sf[SF_FV : SF_FV + 4] = math.nan  # never equal: every channel starts fresh
     sf[SF_X] = math.nan
-    sn = np.zeros(N_SN, dtype=np.int64)
-    nxw = si[SI_NXW]
-    ncw = si[SI_NCW]
+    nxw = int(si[SI_NXW])
+    ncw = int(si[SI_NCW])
     return (
         sf,
-        sn,
+        np.zeros(N_SN, dtype=np.int64),
         np.zeros(nxw, dtype=np.int64),
         np.zeros(nxw),
         np.zeros(ncw, dtype=np.int64),
