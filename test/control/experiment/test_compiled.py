@@ -293,3 +293,14 @@ def test_same_spec_same_bytes_in_one_process():
         for k in a.axes[axis]:
             assert a.axes[axis][k].tobytes() == b.axes[axis][k].tobytes()
     assert a.metrics_dict() == b.metrics_dict() and len(a.t) == 500
+
+
+def test_runs_in_threads_equal_runs_in_turn():
+    """The loop releases the GIL; each run owns its arrays, so threads do not mix them."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    specs = [spec_of(controller=c, duration_s=0.4, seed=i) for i, c in enumerate(ALGORITHMS)]
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        threaded = list(pool.map(lambda s: run_compiled(s, fallback=False), specs))
+    for spec, b in zip(specs, threaded):
+        assert_same(run_compiled(spec, fallback=False), b)

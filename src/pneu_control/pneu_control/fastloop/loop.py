@@ -7,6 +7,8 @@ supervisor (or, without one, are held); the plant steps k → k+1 under the tick
 output with :func:`pneu_sim.physics.kernel.step_period` itself. After the last
 cycle the supervisor still checks s_n, as the runner's last ``advance`` does.
 
+``nogil``: threads can run loops side by side (each run owns its arrays).
+
 Caching: numba's cache is keyed on this file only (a change in a file it calls is
 not seen, numba docs "Cache limitations"), so :func:`refresh_cache` drops the cached
 loop when any source it is built from changed (a digest kept beside the cache).
@@ -50,7 +52,7 @@ __all__ = ["closed_loop", "refresh_cache"]
 _NEUTRAL_V = 5.0  # pneu_msgs_py.contract.samples.NEUTRAL_V: inactive axes, start
 
 
-@njit(cache=True, **JIT)
+@njit(cache=True, nogil=True, **JIT)
 def closed_loop(
     n, T_ns, st, prm, noise, out, active, cp, ci, cs, wp, vt, sup_on, sp, si, sup_state, rec
 ):
