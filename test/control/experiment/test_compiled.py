@@ -162,6 +162,15 @@ def test_rotary_references(ref):
         ("pid", ["pid.anti_windup=none", "linear.pid.y_filter_tf=0.003"]),
         ("ladrc", ["ladrc.accel_feedforward=true", "ladrc.delay_compensation=true"]),
         ("ladrc", ["td.enabled=false", "transport_delay_samples=2"]),
+        (  # controller period 2 ms on the 1 ms plant (eso_smc.k lowered: the set must validate)
+            "ladrc",
+            [
+                "sample_time_s=0.002",
+                "td.h=0.002",
+                "linear.eso_smc.k=0.25",
+                "rotary.eso_smc.k=0.0005",
+            ],
+        ),
         ("eso_smc", ["eso_smc.delay_compensation=true", "eso_smc.integral_anti_windup=false"]),
         ("eso_smc", ["transport_delay_samples=0", "td.enabled=false"]),
         ("eso_smc", ["rotary.eso_smc.friction_compensation=false", "transport_delay_samples=3"]),
@@ -211,6 +220,16 @@ def test_seeds_and_start_position(seed):
     assert_same(*both(dataclasses.replace(spec, x0=0.02)))
 
 
+def test_another_plant_period():
+    from pneu_msgs_py.params.core import with_updates
+    from pneu_sim.physics.plant_file import load_plant
+
+    plant = with_updates(load_plant(), {"sim.T": 0.0005, "sim.n_sub": 5})
+    a, b = both(spec_of(controller="eso_smc", plant=plant, duration_s=0.4))
+    assert_same(a, b)
+    assert b.t[1] == 0.0005
+
+
 @pytest.mark.parametrize("duration_s", [0.0004, 0.001, 0.0025])
 def test_tiny_runs(duration_s):
     a, b = both(spec_of(controller="ladrc", duration_s=duration_s))
@@ -232,6 +251,10 @@ def test_tiny_runs(duration_s):
         ({"stroke_margin_m": 0.066, "stroke_hyst_m": 0.0005}, "soft_limit"),
         ({"watchdog_ms": 0.5}, "watchdog"),
         ({"extend_above_neutral": False, "stroke_margin_m": 0.066}, "soft_limit"),
+        (
+            {"velocity_window_ms": 1.0, "speed_window_ms": 2.0, "max_speed_rpm": 650.0},
+            "overspeed",
+        ),
     ],
 )
 def test_each_supervisor_rule_acts_the_same(overrides, rule):
