@@ -23,6 +23,7 @@ setup(
         "pneu_sim",
         "pneu_driver",
         "numpy>=1.26",
+        "numba>=0.59",  # pneu_control.fastloop: the compiled closed loop
         "PyYAML>=6.0",
         "matplotlib>=3.7",
         "mcap-ros2-support>=0.5",  # pneu_control.experiment.fault_table checks bags with it

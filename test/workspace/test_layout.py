@@ -191,6 +191,7 @@ ROLES = {
         "observers",
         "controller",
         "experiment",
+        "fastloop",
         "analysis",
         "nodes",
         "cli",

@@ -31,7 +31,7 @@ from pneu_sim.physics.plant import Plant
 from pneu_control.analysis.metrics import AxisMetrics, WindowSpec, compute_metrics
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
 
-__all__ = ["SAMPLE_FIELDS", "RunResult", "RunSpec", "run"]
+__all__ = ["SAMPLE_FIELDS", "RunResult", "RunSpec", "result_of", "run"]
 
 SAMPLE_FIELDS = ("p_c1", "p_c2", "p_m1", "x", "theta", "omega", "counts")
 _MEASURED = {"linear": "x", "rotary": "omega"}
@@ -179,7 +179,6 @@ def run(
     active = [(axis, ctrls[axis], rec_state[axis], rec_u[axis]) for axis in AXES if axis in ctrls]
     rec_out: list[tuple[float, float]] = []  # what the DAQ held during each step
     rec_truth: list[tuple[float, float]] = []  # (x, omega) true, only with faults
-    algorithms = {axis: c.params.algorithm for axis, c in ctrls.items()}
     nan_state = (math.nan,) * len(STATE_FIELDS)
 
     sup = None
@@ -262,40 +261,73 @@ def run(
         name: np.array([getattr(rs, name) for rs in rec_samples], dtype=float)
         for name in SAMPLE_FIELDS
     }
-    faults = fault_intervals_of(spec, events_all, period)
     axes: dict[str, dict[str, np.ndarray]] = {}
-    metrics: dict[str, AxisMetrics] = {}
     for axis in ctrls:
         block = np.array(rec_state[axis][:m], dtype=float).reshape(m, len(STATE_FIELDS))
         cols = {name: block[:, i] for i, name in enumerate(STATE_FIELDS)}
         cols["u"] = np.array(rec_u[axis][:m], dtype=float)
         axes[axis] = cols
+    out = np.array(rec_out[:m], dtype=float).reshape(m, 2)
+    truth = {}
+    if rec_truth:
+        tr = np.array(rec_truth[:m], dtype=float).reshape(-1, 2)
+        truth = {"x": tr[:, 0], "omega": tr[:, 1]}
+    return result_of(
+        spec,
+        t,
+        samples,
+        axes,
+        out,
+        events_all,
+        dict(sup.counters) if sup is not None else {},
+        period,
+        wall,
+        interrupted=interrupted,
+        truth=truth,
+    )
+
+
+def result_of(
+    spec: RunSpec,
+    t: np.ndarray,
+    samples: dict[str, np.ndarray],
+    axes: dict[str, dict[str, np.ndarray]],
+    held: np.ndarray,
+    events: list[Any],
+    counters: dict[str, int],
+    period_s: float,
+    wall_s: float,
+    *,
+    interrupted: bool = False,
+    truth: dict[str, np.ndarray] | None = None,
+) -> RunResult:
+    """The :class:`RunResult` of recorded arrays (``held``: (N, 2) V, linear and rotary):
+    fault and safe intervals, then the DESIGN §7 metrics per axis (shared by the runner
+    and the compiled loop, :mod:`pneu_control.experiment.compiled`)."""
+    m = t.shape[0]
+    faults = fault_intervals_of(spec, events, period_s)
+    metrics: dict[str, AxisMetrics] = {}
+    for axis, cols in axes.items():
         window = spec.windows.get(axis, WindowSpec(kind="fixed"))
         measured = samples[_MEASURED[axis]]
         if m > 1:
             metrics[axis] = axis_metrics(
                 axis, t, cols["reference"], measured, window, faults, spec.include_faults
             )
-    out = np.array(rec_out[:m], dtype=float).reshape(m, 2)
-    applied = {"linear": out[:, 0], "rotary": out[:, 1]}
-    truth = {}
-    if rec_truth:
-        tr = np.array(rec_truth[:m], dtype=float).reshape(-1, 2)
-        truth = {"x": tr[:, 0], "omega": tr[:, 1]}
     return RunResult(
         spec,
         t,
         samples,
         axes,
-        algorithms,
+        {axis: spec.controllers[axis].algorithm for axis in axes},
         metrics,
-        wall,
+        wall_s,
         interrupted,
-        applied=applied,
-        truth=truth,
-        safety_events=events_all,
+        applied={"linear": held[:, 0], "rotary": held[:, 1]},
+        truth=truth or {},
+        safety_events=events,
         fault_intervals=faults,
-        safety_counters=dict(sup.counters) if sup is not None else {},
+        safety_counters=counters,
     )
 
 

@@ -494,6 +494,27 @@ class SafetySupervisor:
             out[axis] = AxisStatus(axis, state, tuple(causes), present)
         return out
 
+    def thresholds(self) -> dict[str, Any]:
+        """What the rules compare against, derived once from :attr:`params` (SI; stamps int ns).
+
+        For mirrors of these rules (``pneu_control.fastloop``, the compiled closed loop):
+        the same numbers, not a second derivation of them.
+        """
+        return {
+            "T_ns": self._T_ns,
+            "watchdog_ns": self._wd_ns,
+            "stuck_ns": self._stuck_ns,
+            "stall_ns": self._stall_ns,
+            "x_hi": self._x_hi,
+            "x_lo": self._x_lo,
+            "x_abs_max": self._x_abs_max,
+            "p_max": dict(self._p_max),
+            "live_v": dict(self._live),
+            "u_toward_hi": self._u_toward_hi,
+            "velocity_window": self._x_win.maxlen,
+            "speed_window": self._c_win.maxlen,
+        }
+
     @property
     def tripped(self) -> bool:
         """True while the e-stop or any axis's fault is latched (the heartbeat stops)."""

@@ -19,6 +19,7 @@ No rclpy here: shells convert :class:`ParamSpec` into descriptors themselves.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import types
 import typing
@@ -115,7 +116,9 @@ def _allowed_text(meta: Mapping[str, Any], typ: type) -> str:
     return f"{left}{lo_s}, {hi_s}{right}{unit}"
 
 
+@functools.cache
 def _field_types(cls: type) -> dict[str, Any]:
+    """The resolved field annotations of a parameter dataclass (cached: read only)."""
     return typing.get_type_hints(cls)
 
 
@@ -130,23 +133,26 @@ def _base_type(tp: Any) -> Any:
 def _check_value(key: str, value: Any, tp: Any, meta: Mapping[str, Any]) -> Any:
     """Coerce (int -> float only) and check one scalar value; return it."""
     tp = _base_type(tp)
-    allowed = _allowed_text(meta, tp if isinstance(tp, type) else float)
+
+    def allowed() -> str:  # built only for the error message
+        return _allowed_text(meta, tp if isinstance(tp, type) else float)
+
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ParamError(key, value, f"a number, {allowed}")
+            raise ParamError(key, value, f"a number, {allowed()}")
         value = float(value)
         if not math.isfinite(value):
-            raise ParamError(key, value, allowed)
+            raise ParamError(key, value, allowed())
     elif tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ParamError(key, value, f"an integer, {allowed}")
+            raise ParamError(key, value, f"an integer, {allowed()}")
     elif tp is bool:
         if not isinstance(value, bool):
             raise ParamError(key, value, "true or false")
         return value
     elif tp is str:
         if not isinstance(value, str):
-            raise ParamError(key, value, f"a string, {allowed}")
+            raise ParamError(key, value, f"a string, {allowed()}")
     elif typing.get_origin(tp) is tuple:
         if not isinstance(value, (list, tuple)):
             raise ParamError(key, value, "a list of numbers")
@@ -160,12 +166,12 @@ def _check_value(key: str, value: Any, tp: Any, meta: Mapping[str, Any]) -> Any:
         return value
     choices = meta.get("choices")
     if choices and value not in choices:
-        raise ParamError(key, value, allowed)
+        raise ParamError(key, value, allowed())
     lo, hi = meta.get("lo"), meta.get("hi")
     if lo is not None and (value < lo or (meta.get("lo_open") and value == lo)):
-        raise ParamError(key, value, allowed)
+        raise ParamError(key, value, allowed())
     if hi is not None and (value > hi or (meta.get("hi_open") and value == hi)):
-        raise ParamError(key, value, allowed)
+        raise ParamError(key, value, allowed())
     return value
 
 

@@ -199,17 +199,35 @@ class Plant:
         if not (np.all(np.isfinite(u_l)) and np.all(np.isfinite(u_r))):
             raise ValueError("valve commands must be finite")
         n = u_l.shape[0]
-        noise = np.empty((n, k.N_NOISE))
-        for i in range(n):  # same stream as step(): refill blocks as they run out
-            if self._j >= self._nb:
-                self._gen.standard_normal(out=self._noise)
-                self._j = 0
-            noise[i] = self._noise[self._j]
-            self._j += 1
+        noise = self.noise_rows(n)
         out = np.empty((n, k.N_OUT))
         k.run_periods(self._st, self._prm, noise, u_l, u_r, out)
         self._k += n
         return out
+
+    def noise_rows(self, n: int) -> np.ndarray:
+        """The noise rows of the next ``n`` steps, (n, N_NOISE), drawn from the stream as
+        ``n`` :meth:`step` calls would draw them (blocks refilled as they run out)."""
+        noise = np.empty((n, k.N_NOISE))
+        i = 0
+        while i < n:
+            if self._j >= self._nb:
+                self._gen.standard_normal(out=self._noise)
+                self._j = 0
+            take = min(n - i, self._nb - self._j)
+            noise[i : i + take] = self._noise[self._j : self._j + take]
+            self._j += take
+            i += take
+        return noise
+
+    def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(state, parameter vector, last sample) of :mod:`~pneu_sim.physics.kernel`, live.
+
+        For compiled callers that step :func:`~pneu_sim.physics.kernel.step_period`
+        themselves (``pneu_control.fastloop``) with :meth:`noise_rows`; the sample
+        counter :attr:`k` is then not advanced.
+        """
+        return self._st, self._prm, self._out
 
     @property
     def k(self) -> int:
@@ -288,7 +306,7 @@ class Plant:
     def mean_vane_factor(self) -> float:
         """K̄: mean of Eq. 8's geometric factor over a vane sector, m³ (torque / Δp)."""
         th = np.linspace(0.0, 2 * math.pi / self.params.rotary.n_vanes, 2001)
-        vals = np.array([k.vane_factor(self._prm, t) for t in th])
+        vals = k.vane_factors(self._prm, th)
         return float(np.trapezoid(vals, th) / (th[-1] - th[0]))
 
     # ------------------------------------------------------------------ helpers

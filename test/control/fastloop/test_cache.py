@@ -1,0 +1,42 @@
+"""The cached compiled loop is dropped when a source it is built from changes.
+
+numba keys a cached function on its own file only; the loop inlines the plant
+kernel and the mirrors from other files, so ``refresh_cache`` keeps a digest of
+all of them beside the cache and flushes numba's index when it differs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pneu_control.fastloop import loop
+
+
+class FakeCache:
+    def __init__(self, path: Path):
+        self.cache_path = str(path)
+        self.flushes = 0
+
+    def flush(self) -> None:
+        self.flushes += 1
+
+
+def test_sources_cover_the_mirrors_and_the_plant_kernel():
+    names = {p.name for p in loop._sources()}
+    assert {"loop.py", "axis.py", "plus.py", "supervisor.py", "kernel.py"} <= names
+
+
+def test_a_changed_source_flushes_the_cache_once(tmp_path, monkeypatch):
+    extra = tmp_path / "dep.py"
+    extra.write_text("a = 1\n")
+    real = loop._sources()
+    monkeypatch.setattr(loop, "_sources", lambda: [*real, extra])
+    fake = FakeCache(tmp_path / "cache")
+    monkeypatch.setattr(loop.closed_loop, "_cache", fake)
+    loop.refresh_cache()  # no digest yet: flush, remember
+    assert fake.flushes == 1
+    loop.refresh_cache()  # unchanged sources: the cache stays
+    assert fake.flushes == 1
+    extra.write_text("a = 2\n")
+    loop.refresh_cache()
+    assert fake.flushes == 2
