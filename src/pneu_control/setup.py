@@ -9,6 +9,10 @@ data_files = [
     ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
     (os.path.join("share", PACKAGE), ["package.xml"]),
     (os.path.join("share", PACKAGE, "config"), sorted(glob("config/*.yaml"))),
+    (  # Foxglove / PlotJuggler layouts (pneu_control/analysis/layouts.py)
+        os.path.join("share", PACKAGE, "config", "layouts"),
+        sorted(glob("config/layouts/*.json") + glob("config/layouts/*.xml")),
+    ),
     (os.path.join("share", PACKAGE, "launch"), sorted(glob("launch/*.launch.py"))),
 ]
 
@@ -27,7 +31,12 @@ setup(
         "PyYAML>=6.0",
         "matplotlib>=3.7",
         "mcap-ros2-support>=0.5",  # pneu_control.experiment.fault_table checks bags with it
+        "tqdm>=4.66",  # progress bars (cli/progress.py)
     ],
+    extras_require={
+        "live": ["foxglove-sdk>=0.30"],  # pneu run --live (through pneu_msgs_py.live)
+        "test": ["pytest", "websockets>=13"],  # colcon test runs pytest when this names it
+    },
     zip_safe=True,
     maintainer="pneu developers",
     maintainer_email="pneu@example.org",

@@ -24,6 +24,10 @@ setup(
         "zstandard>=0.22",
         "lz4>=4.0",
     ],
+    extras_require={
+        "live": ["foxglove-sdk>=0.30"],  # pneu_msgs_py.live: imported when a server starts
+        "test": ["pytest", "websockets>=13"],  # colcon test runs pytest when this names it
+    },
     zip_safe=True,
     maintainer="pneu developers",
     maintainer_email="pneu@example.org",

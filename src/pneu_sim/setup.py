@@ -9,6 +9,10 @@ data_files = [
     ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
     (os.path.join("share", PACKAGE), ["package.xml"]),
     (os.path.join("share", PACKAGE, "config"), sorted(glob("config/*.yaml"))),
+    (  # Foxglove / PlotJuggler layouts (pneu_control/analysis/layouts.py)
+        os.path.join("share", PACKAGE, "config", "layouts"),
+        sorted(glob("config/layouts/*.json") + glob("config/layouts/*.xml")),
+    ),
     (os.path.join("share", PACKAGE, "launch"), sorted(glob("launch/*.launch.py"))),
 ]
 
@@ -25,6 +29,7 @@ setup(
         "numba>=0.59",
         "PyYAML>=6.0",
     ],
+    extras_require={"test": ["pytest"]},  # colcon test runs pytest when this names it
     zip_safe=True,
     maintainer="pneu developers",
     maintainer_email="pneu@example.org",

@@ -52,6 +52,7 @@ ROSDEP_PY = {
     "yaml": "python3-yaml",
     "numba": "python3-numba",
     "matplotlib": "python3-matplotlib",
+    "tqdm": "python3-tqdm",
 }
 # pip-only libraries (no rosdep key): must be in setup.py install_requires instead
 PIP_ONLY = {
@@ -60,6 +61,7 @@ PIP_ONLY = {
     "rosbags": "rosbags",
     "zstandard": "zstandard",
     "nidaqmx": "nidaqmx",
+    "foxglove": "foxglove-sdk",  # optional (extras_require "live"), imported when used
 }
 OPTIONAL = {"lz4"}  # imported lazily only for compression="lz4"
 # DESIGN §2: dependency direction between the project's packages
@@ -147,7 +149,9 @@ def test_package_xml_format_3_ament_python(pkg):
 def test_exec_depends_cover_every_import(pkg):
     root = _package_xml(pkg)
     deps = {e.text.strip() for e in root.findall("exec_depend")}
-    requires = " ".join(_setup_kwargs(pkg).get("install_requires", []))
+    kwargs = _setup_kwargs(pkg)
+    extras = [r for reqs in kwargs.get("extras_require", {}).values() for r in reqs]
+    requires = " ".join(kwargs.get("install_requires", []) + extras)
     stdlib = set(sys.stdlib_module_names)
     files = sorted((SRC / pkg / pkg).rglob("*.py")) + sorted((SRC / pkg / "launch").glob("*.py"))
     missing, unknown, wrong_way = [], [], []
@@ -184,7 +188,7 @@ def _role(pkg: str, f: Path) -> str:
 
 # role folders per package: the tree reads like the architecture (ARCHITECTURE.md)
 ROLES = {
-    "pneu_msgs_py": {"contract", "params", "bag", "nodes", "bench"},
+    "pneu_msgs_py": {"contract", "params", "bag", "live", "nodes", "bench"},
     "pneu_sim": {"physics", "cycle", "faults", "daq_sim", "nodes", "cli", "bench"},
     "pneu_control": {
         "algorithms",
@@ -254,8 +258,14 @@ def test_setup_py_data_files_and_resource_marker(pkg):
     assert f"resource/{pkg}" in data.get("share/ament_index/resource_index/packages", [])
     assert (SRC / pkg / "resource" / pkg).is_file()
     assert "package.xml" in data.get(f"share/{pkg}", [])
-    for sub, pattern in (("config", "*.yaml"), ("launch", "*.launch.py")):
-        present = sorted(f"{sub}/{p.name}" for p in (SRC / pkg / sub).glob(pattern))
+    for sub, patterns in (
+        ("config", ("*.yaml",)),
+        ("config/layouts", ("*.json", "*.xml")),  # viewer layouts
+        ("launch", ("*.launch.py",)),
+    ):
+        present = sorted(
+            f"{sub}/{p.name}" for pattern in patterns for p in (SRC / pkg / sub).glob(pattern)
+        )
         if present:
             assert sorted(data.get(f"share/{pkg}/{sub}", [])) == present, (
                 f"{pkg}: {sub} not installed"

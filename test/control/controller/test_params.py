@@ -193,3 +193,31 @@ def test_running_controller_keeps_old_params_on_refusal():
                 )
         assert a.update(_sample(k, x)) == b.update(_sample(k, x))
     assert a.params == p and a.algorithm == "eso_smc"
+
+
+def test_real_controller_params_declare_and_round_trip_for_both_axes():
+    """pneu_control's parameters through pneu_msgs_py's ROS descriptor plumbing (rosbags'
+    Jazzy rcl_interfaces types stand in for rclpy's)."""
+    from pneu_msgs_py.params.core import flatten
+    from pneu_msgs_py.params.ros import PARAMETER_TYPE, declarations, validate_updates
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    ParameterDescriptor = ts.types["rcl_interfaces/msg/ParameterDescriptor"]
+    FloatingPointRange = ts.types["rcl_interfaces/msg/FloatingPointRange"]
+    IntegerRange = ts.types["rcl_interfaces/msg/IntegerRange"]
+    for axis in ("linear", "rotary"):
+        params = load_controller_params(axis)
+        decls = declarations(params, ParameterDescriptor, FloatingPointRange, IntegerRange)
+        assert [n for n, _, _ in decls] == list(flatten(params))
+        for name, value, desc in decls:
+            assert desc.type == PARAMETER_TYPE[type(value)], (
+                name
+            )  # what rclpy infers from the value
+            for r in desc.floating_point_range:  # the loaded value is inside its descriptor range
+                assert r.from_value <= value <= r.to_value, name
+        ok, reason, again = validate_updates(params, [(n, v) for n, v, _ in decls], startup=True)
+        assert ok, reason
+        assert again == params
+        ro = {n for n, _, d in decls if d.read_only}
+        assert {"sample_time_s", "transport_delay_samples"} <= ro

@@ -184,23 +184,3 @@ def test_allowed_text_and_overrides_roundtrip():
     assert over["table"] == [0.0, 1.0]
     ok, _, again = validate_updates(params, list(over.items()))
     assert ok and again == params
-
-
-def test_real_controller_params_declare_and_round_trip_for_both_axes():
-    from pneu_control.controller.params import load_controller_params
-
-    for axis in ("linear", "rotary"):
-        params = load_controller_params(axis)
-        decls = declarations(params, ParameterDescriptor, FloatingPointRange, IntegerRange)
-        assert [n for n, _, _ in decls] == list(flatten(params))
-        for name, value, desc in decls:
-            assert desc.type == PARAMETER_TYPE[type(value)], (
-                name
-            )  # what rclpy infers from the value
-            for r in desc.floating_point_range:  # the loaded value is inside its descriptor range
-                assert r.from_value <= value <= r.to_value, name
-        ok, reason, again = validate_updates(params, [(n, v) for n, v, _ in decls], startup=True)
-        assert ok, reason
-        assert again == params
-        ro = {n for n, _, d in decls if d.read_only}
-        assert {"sample_time_s", "transport_delay_samples"} <= ro

@@ -84,9 +84,10 @@ def main(argv: list[str] | None = None) -> int:
 def _is_user_error(err: Exception) -> bool:
     """Errors a user can fix (bad config, option, file) -> one line, no traceback."""
     from pneu_msgs_py.bag.errors import BagError
+    from pneu_msgs_py.live.errors import LiveError
     from pneu_msgs_py.params.core import ParamError
 
-    return isinstance(err, (ParamError, BagError, UserError, OSError, ValueError))
+    return isinstance(err, (ParamError, BagError, LiveError, UserError, OSError, ValueError))
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@ from pathlib import Path
 from pneu_msgs_py.params.paths import config_dir
 
 from pneu_control.analysis.plots import Series, plot_runs
+from pneu_control.cli.progress import counted, progress_bar
 from pneu_control.experiment import paper, session
 from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, Experiment, experiment_by_id
 
@@ -108,14 +109,18 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     print(f"pneu paper: experiments of the paper on the twin (seed {args.seed})")
     experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
+    n_runs = sum(len(paper.runs_for(e)) for e in experiments) * args.seeds
+    bar = progress_bar(n_runs, "pneu paper", unit="run")  # one step per run, seeds included
     rows = paper.run_paper(
         out,
         seed=args.seed,
-        runner=runner,
+        runner=counted(runner, bar),
         experiments=experiments,
-        seed_runner=seed_runner,
+        seed_runner=counted(seed_runner, bar),
         seeds=args.seeds,
+        log=bar.write,
     )
+    bar.close()
     paper.write_table(rows, out, extra={"seed": args.seed, "seeds": args.seeds})
     if not args.no_plots:
         for exp in experiments:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pneu_sim.cli import live_options
+
 from pneu_control.experiment import session
 
 NAME = "run"
@@ -65,6 +67,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="compute the metrics over the fault intervals too (default: left out)",
     )
+    live_options.add_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -85,7 +88,12 @@ def run(args: argparse.Namespace) -> int:
         safety_file=args.safety,
         include_faults=args.include_faults,
     )
-    result = session.execute(spec, args.out, bag=not args.no_bag, progress=True)
+    live = live_options.open_live(args, axes=axes, kind=args.axis)
+    try:
+        result = session.execute(spec, args.out, bag=not args.no_bag, progress=True, live=live)
+    finally:
+        if live is not None:
+            live.close()
     for axis, m in result.metrics.items():
         print(
             f"{axis:7s} {result.algorithms[axis]:10s} e_max = {m.e_max:8.4f} {m.unit}   "

@@ -13,6 +13,7 @@ from typing import Any
 import yaml
 from pneu_msgs_py.params.core import to_dict
 
+from pneu_control.cli.progress import counted, progress_bar
 from pneu_control.controller.params import load_controller_params
 from pneu_control.experiment import session, tuning
 from pneu_control.experiment.robustness import ROBUSTNESS_VARIANTS, scaled_plant
@@ -90,18 +91,21 @@ def run(args: argparse.Namespace) -> int:
     results: dict[str, dict[str, Any]] = {}
     notes: list[str] = []
     t0 = time.perf_counter()
+    papers = {axis: load_controller_params(axis, args.controllers) for axis in axes}
+    n_points = sum(len(tuning.grid_for(a, x, papers[x])) for x in axes for a in algorithms)
+    bar = progress_bar(n_points, "pneu tune", unit="point")  # one step per grid point scored
     for axis in axes:
-        paper = load_controller_params(axis, args.controllers)
+        paper = papers[axis]
         b0 = tuning.identify_b0(axis, plant)
         unit = "mm/s^2/V" if axis == "linear" else "rpm/s^2/V"
-        print(f"{axis}: identified b0 = {b0:.6g} {unit}", file=sys.stderr)
+        bar.write(f"{axis}: identified b0 = {b0:.6g} {unit}", file=sys.stderr)
         notes.append(f"{axis}: identified b0 = {b0:.6g} {unit}")
-        score = make_score(axis, plant, args.controllers)
+        score = counted(make_score(axis, plant, args.controllers), bar)
         merged: dict[str, Any] = {}
         for alg in algorithms:
             best, cost, n = tuning.tune_axis(axis, alg, b0, score, paper)
             pretty = ", ".join(f"{k}={v:.4g}" for k, v in best.items())
-            print(
+            bar.write(
                 f"  {axis} {alg:8s} tuning RMSE {cost:.4g} after {n} runs: {pretty}",
                 file=sys.stderr,
             )
@@ -109,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
             merged.update(best)
         params = load_controller_params(axis, args.controllers, merged)
         results[axis] = to_dict(params)
+    bar.close()
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(retuned_document(results, {}, notes))

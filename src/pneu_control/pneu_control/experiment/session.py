@@ -14,6 +14,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
+from pneu_msgs_py.live.sink import Tee
 from pneu_msgs_py.params.core import ParamError, to_dict
 from pneu_msgs_py.params.spec import parse_spec, parse_value
 
@@ -194,8 +195,13 @@ def execute(
     bag: bool = True,
     progress: bool = False,
     bag_name: str = "run.mcap",
+    live: Any | None = None,
 ) -> RunResult:
-    """Run ``spec``, write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP."""
+    """Run ``spec``, write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP.
+
+    ``live``: a :class:`pneu_msgs_py.live.server.LiveServer` that gets every cycle
+    too (after the bag); the caller closes it.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     echo = config_echo(spec)
@@ -209,13 +215,14 @@ def execute(
             )
 
             with open_run_bag(out / bag_name, spec, echo) as writer:
-                result = run(spec, bag=writer, progress=report)
+                sink = writer if live is None else Tee(writer, live)
+                result = run(spec, bag=sink, progress=report)
                 writer.add_metadata(
                     INTERVALS_METADATA,
                     intervals_metadata(result.fault_intervals, result.safety_counters),
                 )
         else:
-            result = run(spec, progress=report)
+            result = run(spec, bag=live, progress=report)
     result.save(out, config_echo=echo)
     for iv in result.fault_intervals:
         if iv.kind == "safe":

@@ -16,6 +16,8 @@ from pathlib import Path
 
 from pneu_msgs_py.contract.units import RPM_PER_RAD_S
 
+from pneu_sim.cli import live_options
+
 NAME = "sim"
 HELP = "run the plant twin open loop at constant valve voltages; write CSV + PNG"
 
@@ -84,18 +86,37 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--plant", type=Path, default=None, help="plant YAML (default config/plant.yaml)"
     )
     p.add_argument("--no-plot", action="store_true", help="skip the PNG")
+    live_options.add_arguments(p)
 
 
 def simulate(
-    params, duration_s: float, u_linear: float, u_rotary: float, seed: int = 0, progress=None
+    params,
+    duration_s: float,
+    u_linear: float,
+    u_rotary: float,
+    seed: int = 0,
+    progress=None,
+    live=None,
 ):
-    """Run open loop; returns a list of CSV rows (tuples in CSV_COLUMNS order)."""
+    """Run open loop; returns a list of CSV rows (tuples in CSV_COLUMNS order).
+
+    ``live``: a :class:`pneu_msgs_py.live.server.LiveServer` that gets every sample and
+    the (constant) valve commands.
+    """
     from pneu_sim.physics.plant import Plant
 
     plant = Plant(params, seed=seed)
     n = round(duration_s / plant.T)
     s = plant.reset()
     st = plant.state
+
+    def publish(s) -> None:
+        live.write_cycle(s, ())
+        live.write_command("linear", s.stamp_ns, u_linear)
+        live.write_command("rotary", s.stamp_ns, u_rotary)
+
+    if live is not None:
+        publish(s)
     rows = [
         (
             0.0,
@@ -117,6 +138,8 @@ def simulate(
     for i in range(n):
         s = plant.step(u_linear, u_rotary)
         st = plant.state
+        if live is not None:
+            publish(s)
         rows.append(
             (
                 s.stamp_ns * 1e-9,
@@ -178,9 +201,22 @@ def run(args: argparse.Namespace) -> int:
     def progress(i: int, n: int) -> None:
         print(f"pneu sim: {i}/{n} steps ({100.0 * i / n:.0f} %)", file=sys.stderr, flush=True)
 
-    rows = simulate(
-        params, args.duration, args.linear_voltage, args.rotary_voltage, args.seed, progress
+    live = live_options.open_live(
+        args, axes=("linear", "rotary"), kind="both", controller_state=False
     )
+    try:
+        rows = simulate(
+            params,
+            args.duration,
+            args.linear_voltage,
+            args.rotary_voltage,
+            args.seed,
+            progress,
+            live=live,
+        )
+    finally:
+        if live is not None:
+            live.close()
     csv_path = out / "sim.csv"
     with open(csv_path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)

@@ -1,0 +1,110 @@
+"""The ``--live`` options of ``pneu run`` and ``pneu sim``: serve the run to Foxglove while it runs.
+
+Not a subcommand: both commands add these options and open the server with
+:func:`open_live` (a :class:`pneu_msgs_py.live.server.LiveServer`, which needs
+the optional ``foxglove-sdk`` package; without it, one error line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Iterable
+from typing import Any
+
+from pneu_msgs_py.live import PACES
+from pneu_msgs_py.live.server import DEFAULT_PORT  # foxglove is imported when a server starts
+
+__all__ = ["add_arguments", "open_live"]
+
+
+def _port(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"{v} outside 0 (any free port) to 65535")
+    return v
+
+
+def _wait(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0.0 <= v <= 3600.0:
+        raise argparse.ArgumentTypeError(f"{v:g} s outside [0, 3600] s")
+    return v
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("live view (Foxglove app over WebSocket; needs foxglove-sdk)")
+    g.add_argument(
+        "--live",
+        nargs="?",
+        const=DEFAULT_PORT,
+        default=None,
+        type=_port,
+        metavar="PORT",
+        help=f"serve the run to Foxglove while it runs, on the bag's topics (port default "
+        f"{DEFAULT_PORT}; 0 = any free port); the ws:// URL is printed",
+    )
+    g.add_argument(
+        "--live-host",
+        default="127.0.0.1",
+        metavar="HOST",
+        help="interface to serve on (default 127.0.0.1: this machine; 0.0.0.0: every interface)",
+    )
+    g.add_argument(
+        "--live-pace",
+        choices=PACES,
+        default="realtime",
+        help="realtime: simulated time advances with the wall clock (default); "
+        "fast: as fast as the run goes",
+    )
+    g.add_argument(
+        "--live-wait",
+        type=_wait,
+        default=0.0,
+        metavar="S",
+        help="wait up to S seconds for a viewer to subscribe before the run starts "
+        "(default 0: start at once; messages sent before a viewer subscribes are not kept)",
+    )
+
+
+def open_live(
+    args: argparse.Namespace, *, axes: Iterable[str], kind: str, controller_state: bool = True
+) -> Any:
+    """The live server the options ask for (None without ``--live``); prints its URL on stderr.
+
+    ``kind``: ``linear`` | ``rotary`` | ``both``, the Foxglove layout to suggest.
+    """
+    if args.live is None:
+        return None
+    from pneu_msgs_py.live.server import LiveServer
+    from pneu_msgs_py.params.paths import config_dir
+
+    server = LiveServer(
+        axes=axes,
+        port=args.live,
+        host=args.live_host,
+        pace=args.live_pace,
+        controller_state=controller_state,
+    )
+    layout = config_dir() / "layouts" / f"foxglove_{kind}.json"
+    print(
+        f"live view: {server.url} ({args.live_pace}) -- Foxglove: Open connection > "
+        f"Foxglove WebSocket; layout: {layout}",
+        file=sys.stderr,
+        flush=True,
+    )
+    if args.live_wait > 0:
+        print(
+            f"live view: waiting up to {args.live_wait:g} s for a viewer",
+            file=sys.stderr,
+            flush=True,
+        )
+        if not server.wait_for_viewer(args.live_wait):
+            print("live view: no viewer yet; starting the run", file=sys.stderr, flush=True)
+    return server
