@@ -443,6 +443,9 @@ class Node:
     def get_name(self):
         return self._name
 
+    def count_subscribers(self, topic):
+        return len(WORLD.subs[topic])
+
     def get_fully_qualified_name(self):
         return "/" + self._name
 

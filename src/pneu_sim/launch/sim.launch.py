@@ -72,6 +72,7 @@ def _setup(arg: dict[str, str]) -> list:
         # before sample 0: every sensor topic matched by its subscribers (the controllers
         # take 3 / 1 of the 5 topics, so at least the recorder or the logger)
         "startup.min_subscribers": 1,
+        "startup.wait_for_logger": True,  # the run's metadata needs every node's parameters
     }
     exit_action = [Shutdown(reason="simulation finished")]
     if hosted:

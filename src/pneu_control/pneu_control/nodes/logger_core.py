@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import json
 import struct
+import threading
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -200,7 +201,9 @@ class LoggerCore:
         )
         self.node_params: dict[str, dict[str, Any]] = {}
         self.changes: list[dict[str, Any]] = []
-        _warm_imports()  # what close() needs, loaded now: a shutdown must be quick
+        # what close() needs, loaded now in the background: a shutdown must be quick, and the
+        # node must be up at once to catch the graph's parameters
+        threading.Thread(target=_warm_imports, name="logger_warm_imports", daemon=True).start()
         self.counts: dict[str, int] = {}
         self.bad = 0
         self._lockstep = mode == "lockstep"

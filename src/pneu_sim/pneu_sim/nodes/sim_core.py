@@ -125,6 +125,12 @@ class RealtimeParams:
 
 @dataclass(frozen=True)
 class StartupParams:
+    wait_for_logger: bool = param(
+        False,
+        desc="before sample 0: wait until the logger node listens on /parameter_events, so "
+        "that it has every node's parameters for the run's metadata",
+        read_only=True,
+    )
     min_subscribers: int = param(
         1,
         desc="before sample 0: wait until every sensor topic has this many matched subscriptions "

@@ -249,6 +249,8 @@ class SimNode(ShellDefaults, Node):
     def _ready(self) -> bool:
         sp = self.p.startup
         ok = all(pub.get_subscription_count() >= sp.min_subscribers for pub in self.pubs.values())
+        if sp.wait_for_logger:  # the logger is the one node listening to parameter events
+            ok = ok and self.count_subscribers("/parameter_events") >= 1
         return ok and all(sub.get_publisher_count() >= 1 for sub in self.cmd_subs)
 
     def _watch(self) -> None:
