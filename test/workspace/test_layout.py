@@ -51,6 +51,7 @@ ROSDEP_PY = {
     "numpy": "python3-numpy",
     "yaml": "python3-yaml",
     "numba": "python3-numba",
+    "scipy": "python3-scipy",
     "matplotlib": "python3-matplotlib",
 }
 # pip-only libraries (no rosdep key): must be in setup.py install_requires instead
@@ -60,6 +61,7 @@ PIP_ONLY = {
     "rosbags": "rosbags",
     "zstandard": "zstandard",
     "nidaqmx": "nidaqmx",
+    "distributed": "distributed",
 }
 OPTIONAL = {"lz4"}  # imported lazily only for compression="lz4"
 # DESIGN §2: dependency direction between the project's packages
@@ -192,6 +194,7 @@ ROLES = {
         "controller",
         "experiment",
         "analysis",
+        "sweep",
         "nodes",
         "cli",
         "bench",

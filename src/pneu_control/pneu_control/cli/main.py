@@ -22,6 +22,7 @@ SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("sim", "pneu_sim.cli.sim"),
     ("run", "pneu_control.cli.run"),
     ("paper", "pneu_control.cli.paper"),
+    ("sweep", "pneu_control.cli.sweep"),
     ("analyze", "pneu_control.cli.analyze"),
     ("plot", "pneu_control.cli.plot"),
     ("compare", "pneu_control.cli.compare"),
