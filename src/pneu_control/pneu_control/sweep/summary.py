@@ -243,7 +243,7 @@ def render_summary(
         nom = nominal.get((g.experiment, g.controller, g.gains))
         nom_text = "—" if nom is None else _q(nom[0] if math.isfinite(nom[0]) else math.inf)
         sens = ", ".join(
-            f"{name} {rho:+.2f}" + ("" if abs(rho) >= sig else " (n.s.)")
+            f"{name} {rho:+.2f}" + ("" if abs(rho) > sig else " (n.s.)")
             for name, rho in g.sensitivity
         )
         stated = ""
