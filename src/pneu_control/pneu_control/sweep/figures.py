@@ -3,8 +3,9 @@
 Top: the tracking error |e(t)| (max per bin, the metric's averaging) over the
 plant samples, median line and 5–95 % band, per controller and gain set (the
 paper's gains dashed). Bottom: e_max per controller and gain set, median dot,
-5–95 % bar, the paper's figure as a red star; runs without a number (trips)
-are drawn at the top edge and counted in the label.
+5–95 % bar, the paper's figure as a red star; a band edge without a number
+(runs the supervisor stopped) is drawn at the top edge marked "trip", a median
+without one as a cross there; the trips are counted in the label.
 """
 
 from __future__ import annotations
@@ -64,10 +65,12 @@ def plot_bands(
             [i],
             [yv[1]],
             yerr=[[yv[1] - yv[0]], [yv[2] - yv[1]]],
-            fmt="o",
+            fmt="x" if math.isinf(med) else "o",
             color=colour,
             capsize=4,
         )
+        if math.isinf(hi):  # the band reaches runs without a number: say so at the top
+            ax1.annotate("trip", (i, top), fontsize=7, ha="center", va="bottom", color=colour)
         if g.paper_e_max is not None:
             ax1.plot([i], [g.paper_e_max], "r*", ms=10, label="paper" if i == 0 else None)
     ax0.set_yscale("log")
