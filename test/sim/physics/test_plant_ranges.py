@@ -148,3 +148,10 @@ def test_bad_range_refused_naming_the_field(tree, path, update, starts, says):
     assert msg.startswith(starts), msg
     assert says in msg, msg
     assert "\n" not in msg
+
+
+def test_a_bad_value_is_named_before_its_range(tree):
+    msg = _refused(tree, "linear.V_1d", value=0.0)
+    assert msg.startswith("linear.V_1d: 0.0 refused; allowed: (0, 0.001] m^3"), msg
+    msg = _refused(tree, "supply.p_s_rotary", value=5e4)
+    assert msg.startswith("supply.p_s_rotary: 50000.0 refused"), msg

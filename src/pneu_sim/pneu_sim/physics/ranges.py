@@ -65,7 +65,7 @@ def check_range(name: str, value: Any, rng: Any, meta: Mapping[str, Any]) -> tup
     text, ok = _allowed(meta)
     if not lo < hi or not (ok(lo) and ok(hi)):
         raise ParamError(f"{name}.range", [lo, hi], f"lo < hi, both in {text}{unit}")
-    if _real(value) and not lo <= value <= hi:
+    if _real(value) and ok(value) and not lo <= value <= hi:  # a bad value: its own error
         raise ParamError(
             f"{name}.range", [lo, hi], f"an interval holding the value {value:g}{unit}"
         )
@@ -88,7 +88,7 @@ def check_alternatives(
             raise ParamError(f"{name}.alternatives.{label}", v, need)
         out.append((label, float(v)))
     values = [v for _, v in out]
-    if len(set(values)) != len(values) or (_real(value) and float(value) not in values):
+    if len(set(values)) != len(values) or (_real(value) and ok(value) and value not in values):
         raise ParamError(f"{name}.alternatives", dict(alts), need)
     return tuple(out)
 
