@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from pneu_control.controller.params import ALGORITHMS
 from pneu_control.experiment import paper, session
 from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, Experiment
 from pneu_control.sweep.executors import map_tasks
@@ -137,12 +138,9 @@ def plan_sweep(
     points = draw_points(factors, samples, seed, sampler)
     exps = list(experiments or PAPER_EXPERIMENTS)
     files = _files(Path(config_dir) if config_dir is not None else None)
-    for name, known in (("controller", {"pid", "ladrc", "eso_smc", "eso_smc_plus"}),):
-        for c in controllers:
-            if c not in known:
-                raise ValueError(
-                    f"{name}: {c!r} refused; allowed: one of {', '.join(sorted(known))}"
-                )
+    for c in controllers:
+        if c not in ALGORITHMS:
+            raise ValueError(f"controller: {c!r} refused; allowed: one of {', '.join(ALGORITHMS)}")
     for g in gains:
         if g not in files:
             raise ValueError(f"gains: {g!r} refused; allowed: one of {', '.join(files)}")
