@@ -44,6 +44,7 @@ def plot_bands(
     fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(9.0, 7.0))
     groups = [g for g in summaries if g.experiment == exp.id]
     n = len({r["sample"] for r in rows if r["experiment"] == exp.id})
+    floor = []
     for i, g in enumerate(groups):
         idx = [
             k
@@ -57,6 +58,9 @@ def plot_bands(
         colour = f"C{i % 10}"
         label = f"{g.controller} ({g.gains})"
         ax0.plot(t, q[1], style, color=colour, lw=1.0, label=label)
+        positive = q[1][np.isfinite(q[1]) & (q[1] > 0)]
+        if positive.size:
+            floor.append(float(positive.min()))
         ax0.fill_between(t, q[0], q[2], color=colour, alpha=0.15, lw=0)
         lo, med, hi = g.e_max.q05, g.e_max.median, g.e_max.q95
         top = _finite_top(groups)
@@ -74,6 +78,8 @@ def plot_bands(
         if g.paper_e_max is not None:
             ax1.plot([i], [g.paper_e_max], "r*", ms=10, label="paper" if i == 0 else None)
     ax0.set_yscale("log")
+    if floor:  # a quantised error can be 0 in a bin: keep the axis on the medians' decades
+        ax0.set_ylim(bottom=10.0 ** (math.floor(math.log10(min(floor))) - 1))
     ax0.set_xlabel("t (s)")
     ax0.set_ylabel(f"|e| ({exp.unit}), max per {dt_s * 1e3:.0f} ms")
     ax0.legend(fontsize=7, ncol=2, loc="upper right")

@@ -243,7 +243,7 @@ def render_summary(
         nom = nominal.get((g.experiment, g.controller, g.gains))
         nom_text = "—" if nom is None else _q(nom[0] if math.isfinite(nom[0]) else math.inf)
         sens = ", ".join(
-            f"{name} {rho:+.2f}" + ("" if abs(rho) > sig else " (n.s.)")
+            f"{_md(name)} {rho:+.2f}" + ("" if abs(rho) > sig else " (n.s.)")
             for name, rho in g.sensitivity
         )
         stated = ""
@@ -273,6 +273,11 @@ def render_summary(
                 f"{r.p_ladrc_lt_pid:.2f} |"
             )
     return "\n".join(lines) + "\n"
+
+
+def _md(text: str) -> str:
+    """A factor name inside a Markdown table cell (``supply[gauge|absolute]``)."""
+    return text.replace("|", "\\|")
 
 
 def _opt(x: float | None) -> str:
