@@ -51,6 +51,7 @@ ROSDEP_PY = {
     "numpy": "python3-numpy",
     "yaml": "python3-yaml",
     "numba": "python3-numba",
+    "scipy": "python3-scipy",
     "matplotlib": "python3-matplotlib",
     "tqdm": "python3-tqdm",
 }
@@ -62,6 +63,7 @@ PIP_ONLY = {
     "zstandard": "zstandard",
     "nidaqmx": "nidaqmx",
     "foxglove": "foxglove-sdk",  # optional (extras_require "live"), imported when used
+    "distributed": "distributed",
 }
 OPTIONAL = {"lz4"}  # imported lazily only for compression="lz4"
 # DESIGN §2: dependency direction between the project's packages
@@ -197,6 +199,7 @@ ROLES = {
         "experiment",
         "fastloop",
         "analysis",
+        "sweep",
         "nodes",
         "cli",
         "bench",

@@ -35,7 +35,17 @@ def test_every_leaf_has_unit_and_source(tree):
     leaves = dict(_leaves(tree))
     assert len(leaves) > 60
     for name, leaf in leaves.items():
-        assert set(leaf) == {"value", "unit", "source"}, name
+        assert (
+            {"value", "unit", "source"}
+            <= set(leaf)
+            <= {
+                "value",
+                "unit",
+                "source",
+                "range",
+                "alternatives",
+            }
+        ), name
         assert leaf["unit"], name
         assert len(leaf["source"]) > 5, name
 

@@ -20,8 +20,8 @@ from typing import Any
 
 NAME = "bench"
 HELP = (
-    "measure plant, closed-loop (Python and compiled), logging, analysis, shell and loop-pacing "
-    "speed (JSON with --json)"
+    "measure plant, closed-loop (Python and compiled), sweep, logging, analysis, shell and "
+    "loop-pacing speed (JSON with --json)"
 )
 
 FIGURES = (
@@ -30,6 +30,7 @@ FIGURES = (
     "compiled_closed_loop_rtf",
     "compiled_closed_loop_cpu_rtf",
     "closed_loop_logged_rtf",
+    "sweep_runs_per_s",
     "analyze_msgs_per_s",
     "baseline_msgs_per_s",
     "shell_us_per_sample",
@@ -44,7 +45,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--only",
         action="append",
         default=[],
-        choices=("plant", "closed_loop", "compiled", "logging", "analysis", "shell", "loop"),
+        choices=(
+            "plant",
+            "closed_loop",
+            "compiled",
+            "sweep",
+            "logging",
+            "analysis",
+            "shell",
+            "loop",
+        ),
         help="run only these groups (repeatable)",
     )
     p.add_argument("--quick", action="store_true", help="shorter runs (smoke check of the bench)")
@@ -111,6 +121,14 @@ def _groups(quick: bool) -> dict[str, Callable[[], dict[str, Any]]]:
 
         return compiled_rtf(d)
 
+    def sweep() -> dict[str, Any]:
+        from pneu_control.bench.sweep import sweep_runs_per_s
+
+        # 20 s runs in either case; --quick: 2 per worker instead of 4
+        from pneu_control.sweep.executors import default_workers
+
+        return sweep_runs_per_s((2 if quick else 4) * default_workers())
+
     def logging() -> dict[str, Any]:
         return {"closed_loop_logged_rtf": closed_loop_rtf(d, logged=True)}
 
@@ -134,6 +152,7 @@ def _groups(quick: bool) -> dict[str, Callable[[], dict[str, Any]]]:
         "plant": plant,
         "closed_loop": closed_loop,
         "compiled": compiled,
+        "sweep": sweep,
         "logging": logging,
         "analysis": analysis,
         "shell": shell,

@@ -23,6 +23,7 @@ SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("run", "pneu_control.cli.run"),
     ("rig", "pneu_control.cli.rig"),
     ("paper", "pneu_control.cli.paper"),
+    ("sweep", "pneu_control.cli.sweep"),
     ("analyze", "pneu_control.cli.analyze"),
     ("plot", "pneu_control.cli.plot"),
     ("compare", "pneu_control.cli.compare"),

@@ -46,6 +46,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="run only these experiments (repeatable): "
         + ", ".join(e.id for e in PAPER_EXPERIMENTS),
     )
+    p.add_argument(
+        "--uncertainty",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also run every row over N plant samples drawn from plant.yaml's ranges: "
+        "median and 5-95 %% band beside each figure, the paper's ranking odds, "
+        "sensitivities, band figures (uncertainty/ in --out)",
+    )
+    from pneu_control.cli.sweep import add_executor_arguments
+
+    add_executor_arguments(p)
 
 
 def _series(result, exp: Experiment, label: str, m) -> Series:
@@ -106,6 +118,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.seeds < 1:
         raise ValueError(f"--seeds: {args.seeds} refused; allowed: an integer >= 1")
+    if args.uncertainty < 0:
+        raise ValueError(f"--uncertainty: {args.uncertainty} refused; allowed: an integer >= 0")
+    from pneu_control.cli.sweep import check_executor_args
+
+    check_executor_args(args)
     t0 = time.perf_counter()
     print(f"pneu paper: experiments of the paper on the twin (seed {args.seed})")
     experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
@@ -122,6 +139,9 @@ def run(args: argparse.Namespace) -> int:
     )
     bar.close()
     paper.write_table(rows, out, extra={"seed": args.seed, "seeds": args.seeds})
+    band_md = ""
+    if args.uncertainty:
+        band_md = _uncertainty(args, rows, experiments, cfg, out)
     if not args.no_plots:
         for exp in experiments:
             for gains in paper.PAPER_GAIN_SETS:
@@ -137,12 +157,59 @@ def run(args: argparse.Namespace) -> int:
                 plot_runs(series, f"{exp.title}: {gains} gains", out / f"{exp.id}__{gains}.png")
     print()
     print(paper.render_markdown(rows))
+    if band_md:
+        print(band_md)
     print(
         f"wrote {out}/paper_table.json, paper_table.md, figures and one bag per run "
         f"in {time.perf_counter() - t0:.1f} s",
         file=sys.stderr,
     )
     return 0
+
+
+def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
+    """The rows over ``--uncertainty`` plant samples: out/uncertainty/, and the band
+    table appended to paper_table.md/json beside the nominal figures."""
+    import json
+
+    from pneu_control.cli.sweep import progress_printer
+    from pneu_control.sweep.engine import plan_sweep, run_sweep
+    from pneu_control.sweep.report import write_sweep
+
+    plan = plan_sweep(
+        samples=args.uncertainty,
+        seed=args.seed,
+        sampler=args.sampler,
+        experiments=experiments,
+        plant_file=args.plant,
+        config_dir=cfg,
+    )
+    print(
+        f"pneu paper: {len(plan.tasks)} runs over {args.uncertainty} plant samples "
+        f"({len(plan.factors)} factors) on {args.executor}",
+        file=sys.stderr,
+    )
+    result = run_sweep(
+        plan,
+        executor=args.executor,
+        workers=args.workers,
+        address=args.address,
+        progress=progress_printer("uncertainty"),
+    )
+    nominal = {(r.id, r.controller, r.gains): (r.e_max, r.rmse) for r in rows}
+    _, _, md = write_sweep(result, out / "uncertainty", plots=not args.no_plots, nominal=nominal)
+    md = f"## Over {args.uncertainty} plant samples (uncertainty/)\n\n{md}"
+    with open(out / "paper_table.md", "a", encoding="utf-8") as fh:
+        fh.write("\n" + md)
+    doc = json.loads((out / "paper_table.json").read_text())
+    doc["uncertainty"] = json.loads((out / "uncertainty" / "summary.json").read_text())
+    (out / "paper_table.json").write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
+    print(
+        f"  uncertainty: {len(plan.tasks)} runs in {result.wall_s:.1f} s "
+        f"({len(plan.tasks) / result.wall_s:.2f} runs/s)",
+        file=sys.stderr,
+    )
+    return md
 
 
 def _with_window(spec, exp: Experiment):

@@ -62,11 +62,16 @@ def param(
     choices: tuple[str, ...] | None = None,
     source: str = "",
     read_only: bool = False,
+    band: tuple[float, float] | None = None,
+    alternatives: tuple[tuple[str, float], ...] | None = None,
 ) -> Any:
     """A dataclass field with pneu metadata.
 
     ``lo``/``hi`` are inclusive bounds unless ``lo_open``/``hi_open``.
     ``read_only`` marks values whose change needs a restart (ROS descriptor).
+    ``band`` (lo, hi) is the range an uncertain value may take (its reason in
+    ``source``); ``alternatives`` ((label, value), ...) are discrete readings
+    of it. Neither is checked here: the file that carries them checks them.
     """
     meta = {
         "pneu": True,
@@ -79,6 +84,8 @@ def param(
         "choices": choices,
         "source": source,
         "read_only": read_only,
+        "band": band,
+        "alternatives": alternatives,
     }
     if dataclasses.is_dataclass(default) and not isinstance(default, type):
         return dataclasses.field(default_factory=lambda d=default: d, metadata=meta)

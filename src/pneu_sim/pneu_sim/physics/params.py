@@ -80,7 +80,8 @@ class AmbientParams:
         lo=250.0,
         hi=350.0,
         desc="gas and ambient temperature (paper T = T0)",
-        source="paper Table 1",
+        source="paper Table 1; range: laboratory air 17–37 °C (estimated; the paper gives 300 K only)",
+        band=(290.0, 310.0),
     )
     R: float = param(
         287.0,
@@ -107,7 +108,8 @@ class AmbientParams:
         lo=1.0,
         hi=1.4,
         desc="polytropic index of the chamber process (flow and volume terms)",
-        source="Richer & Hurmuzlu 2000 (α ≈ 1.2); paper's γ with T = T0 is inconsistent (errata Eq. 4)",
+        source="Richer & Hurmuzlu 2000 (α ≈ 1.2); paper's γ with T = T0 is inconsistent (errata Eq. 4); range: isothermal 1.0 to adiabatic 1.4",
+        band=(1.0, 1.4),
     )
 
     def _check(self) -> None:
@@ -131,7 +133,8 @@ class SupplyParams:
         lo=1.2e5,
         hi=1.1e6,
         desc="supply of the linear valve, absolute",
-        source="paper: 0.2 MPa, read as gauge (a regulator setting is a gauge reading) + p_a",
+        source="paper: 0.2 MPa, read as gauge (a regulator setting is a gauge reading) + p_a; alternative: 0.2 MPa absolute (the paper does not say which)",
+        alternatives=(("gauge", 0.2e6 + P_ATM), ("absolute", 0.2e6)),
     )
     p_s_rotary: float = param(
         0.4e6 + P_ATM,
@@ -139,7 +142,8 @@ class SupplyParams:
         lo=1.2e5,
         hi=1.1e6,
         desc="supply of the rotary valve, absolute",
-        source="paper: 0.4 MPa, read as gauge (a regulator setting is a gauge reading) + p_a",
+        source="paper: 0.4 MPa, read as gauge (a regulator setting is a gauge reading) + p_a; alternative: 0.4 MPa absolute (the paper does not say which)",
+        alternatives=(("gauge", 0.4e6 + P_ATM), ("absolute", 0.4e6)),
     )
 
 
@@ -152,7 +156,8 @@ class LinearParams:
         lo_open=True,
         hi=1e-2,
         desc="piston area, cap side (chamber 1)",
-        source="paper Table 1 (Ø32 bore)",
+        source="paper Table 1 (Ø32 bore); range ±0.6 %: ±0.1 mm on the bore (estimated machining tolerance)",
+        band=(0.0007992, 0.0008088),
     )
     A_c2: float = param(
         6.912e-4,
@@ -161,7 +166,8 @@ class LinearParams:
         lo_open=True,
         hi=1e-2,
         desc="annulus area, rod side (chamber 2)",
-        source="paper Table 1 (Ø32 bore, Ø12 rod)",
+        source="paper Table 1 (Ø32 bore, Ø12 rod); range ±0.6 %: ±0.1 mm on bore and rod (estimated machining tolerance)",
+        band=(0.0006871, 0.0006953),
     )
     V_1d: float = param(
         1.1e-5,
@@ -170,7 +176,8 @@ class LinearParams:
         lo_open=True,
         hi=1e-3,
         desc="dead volume chamber 1 (incl. tubing)",
-        source="paper Table 1",
+        source="paper Table 1; range ±30 %: the tubing to the valve is not given (estimated)",
+        band=(7.7e-06, 1.43e-05),
     )
     V_2d: float = param(
         0.6e-5,
@@ -179,7 +186,8 @@ class LinearParams:
         lo_open=True,
         hi=1e-3,
         desc="dead volume chamber 2 (incl. tubing)",
-        source="paper Table 1",
+        source="paper Table 1; range ±30 %: the tubing to the valve is not given (estimated)",
+        band=(4.2e-06, 7.8e-06),
     )
     M: float = param(
         0.28,
@@ -188,7 +196,8 @@ class LinearParams:
         lo_open=True,
         hi=100.0,
         desc="moving mass (piston, rods, load)",
-        source="paper Table 1",
+        source="paper Table 1; range ±10 %: which parts of the sleeve and rotor move with the piston is not stated (estimated)",
+        band=(0.252, 0.308),
     )
     L: float = param(
         0.15,
@@ -205,7 +214,8 @@ class LinearParams:
         lo=0.0,
         hi=200.0,
         desc="sliding (Coulomb) friction level of Eq. 2",
-        source="paper Eq. 2 fit",
+        source="paper Eq. 2 fit; range ±25 %: seal friction moves with lubrication, pressure and temperature (estimated)",
+        band=(2.213, 3.688),
     )
     c_v: float = param(
         88.81,
@@ -213,7 +223,8 @@ class LinearParams:
         lo=0.0,
         hi=1e4,
         desc="viscous friction coefficient of Eq. 2",
-        source="paper Eq. 2 fit",
+        source="paper Eq. 2 fit; range ±25 %: seal friction moves with lubrication, pressure and temperature (estimated)",
+        band=(66.61, 111.0),
     )
     breakaway_ratio: float = param(
         1.5,
@@ -221,7 +232,8 @@ class LinearParams:
         lo=1.0,
         hi=3.0,
         desc="static (breakaway) friction / A_f",
-        source="estimated: middle of the 1.3-2x range for elastomer (PPV) piston seals quoted in DESIGN §8; no DSBC-32 measurement found",
+        source="estimated: middle of the 1.3-2x range for elastomer (PPV) piston seals quoted in DESIGN §8; no DSBC-32 measurement found; range: the quoted 1.3-2x",
+        band=(1.3, 2.0),
     )
     v_s: float = param(
         0.01,
@@ -230,7 +242,8 @@ class LinearParams:
         lo_open=True,
         hi=1.0,
         desc="Stribeck velocity of the breakaway bump",
-        source="estimated: order of 10 mm/s typical of lubricated pneumatic cylinder seals",
+        source="estimated: order of 10 mm/s typical of lubricated pneumatic cylinder seals; range: 5-20 mm/s (estimated, ×/÷ 2)",
+        band=(0.005, 0.02),
     )
 
     def _check(self) -> None:
@@ -254,7 +267,8 @@ class ValveParams:
         lo_open=True,
         hi=0.1,
         desc="nominal flow (ANR) at p_n_up -> p_n_down, fully open",
-        source="Festo MPYE-5-1/8-LF: 350 l/min (6 -> 5 bar gauge)",
+        source="Festo MPYE-5-1/8-LF: 350 l/min (6 -> 5 bar gauge); range ±10 % (Festo nominal flow tolerance)",
+        band=(0.00525, 0.006417),
     )
     p_n_up: float = param(
         6e5 + P_ATM,
@@ -295,7 +309,8 @@ class ValveParams:
         lo_open=True,
         hi=0.528,
         desc="critical pressure ratio",
-        source="paper Table 1",
+        source="paper Table 1; range: Festo's 0.23 (MPYE-5-1/4 datasheet) to 0.35, ±0.06 about the paper's",
+        band=(0.23, 0.35),
     )
     b_lam: float = param(
         0.999,
@@ -323,7 +338,8 @@ class ValveParams:
         lo=0.0,
         hi=0.1,
         desc="centre leakage area per path / max area (fades out on the closing paths over the first table step)",
-        source="estimated: gives ≈ 9 l/min ANR at 6 bar with ports blocked, under the datasheet maximum of 20 l/min (LF)",
+        source="estimated: gives ≈ 9 l/min ANR at 6 bar with ports blocked, under the datasheet maximum of 20 l/min (LF); range: a tight new valve (≈ 2 l/min) to the datasheet maximum 20 l/min",
+        band=(0.002, 0.022),
     )
     hysteresis: float = param(
         0.04,
@@ -331,7 +347,8 @@ class ValveParams:
         lo=0.0,
         hi=1.0,
         desc="spool hysteresis (play) width",
-        source="Festo MPYE catalogue: ≤ 0.4 % of max stroke (10 V span)",
+        source="Festo MPYE catalogue: ≤ 0.4 % of max stroke (10 V span); range: 0 up to the catalogue's bound",
+        band=(0.0, 0.04),
     )
     omega_n: float = param(
         2.0 * math.pi * 95.0,
@@ -339,7 +356,10 @@ class ValveParams:
         lo=1.0,
         hi=1e4,
         desc="spool natural frequency (2nd order)",
-        source="Festo MPYE-5-1/8: -3 dB limit frequency ≈ 95 Hz (" + _PLANT_SHEET + ")",
+        source="Festo MPYE-5-1/8: -3 dB limit frequency ≈ 95 Hz ("
+        + _PLANT_SHEET
+        + "); range ±20 %: the limit frequency falls with amplitude and supply (estimated)",
+        band=(477.5, 716.3),
     )
     zeta: float = param(
         0.7,
@@ -347,7 +367,8 @@ class ValveParams:
         lo=0.05,
         hi=5.0,
         desc="spool damping ratio",
-        source="estimated (" + _PLANT_SHEET + ")",
+        source="estimated (" + _PLANT_SHEET + "); range 0.5-1.0 (estimated)",
+        band=(0.5, 1.0),
     )
 
     def _check(self) -> None:
@@ -377,7 +398,8 @@ class RotaryParams:
         desc="stator bore radius (Eq. 6)",
         source="estimated ("
         + _PLANT_SHEET
-        + "), checked against the 1AM's published free speed and power (test_sim_motor)",
+        + "), checked against the 1AM's published free speed and power (test_sim_motor); range ±1 %: with L_m pinned on the datasheet torque, R_m and r_m shape the ripple (d_m ±15 %)",
+        band=(0.01881, 0.01919),
     )
     r_m: float = param(
         0.0165,
@@ -386,7 +408,10 @@ class RotaryParams:
         lo_open=True,
         hi=0.2,
         desc="rotor radius (Eq. 6)",
-        source="estimated (" + _PLANT_SHEET + ")",
+        source="estimated ("
+        + _PLANT_SHEET
+        + "); range ±1 %: with L_m pinned on the datasheet torque, R_m and r_m shape the ripple (d_m ±15 %)",
+        band=(0.01634, 0.01666),
     )
     L_m: float = param(
         0.021,
@@ -397,7 +422,8 @@ class RotaryParams:
         desc="vane length (Eq. 8)",
         source="estimated: sets the sector-mean Eq. 8 factor K = 1.87e-6 m^3 so that K * 100 psi = 1.29 N*m"
         " = 4 P_max / omega_free, the stall torque of a linear torque-speed line through Gast 1AM's"
-        " 0.45 hp and 10 000 rpm at 100 psi (the sheet's 25 mm ignores the 2 d R cos term of Eq. 8)",
+        " 0.45 hp and 10 000 rpm at 100 psi (the sheet's 25 mm ignores the 2 d R cos term of Eq. 8); range ±20 %: a linear torque-speed line is an approximation (estimated)",
+        band=(0.0168, 0.0252),
     )
     n_vanes: int = param(
         4,
@@ -414,7 +440,8 @@ class RotaryParams:
         lo_open=True,
         hi=1.0,
         desc="rotor + coupling + rod + piston inertia",
-        source="estimated ±50 % (" + _PLANT_SHEET + ")",
+        source="estimated (" + _PLANT_SHEET + "); range ±50 %, as the sheet gives it",
+        band=(1.75e-05, 5.25e-05),
     )
     M_c: float = param(
         0.1281,
@@ -422,7 +449,8 @@ class RotaryParams:
         lo=0.0,
         hi=10.0,
         desc="Coulomb friction torque (Eq. 9)",
-        source="paper Eq. 9 fit",
+        source="paper Eq. 9 fit; range ±25 %: vane friction moves with lubrication, pressure and temperature (estimated)",
+        band=(0.09607, 0.1601),
     )
     M_v: float = param(
         8.66e-5,
@@ -430,7 +458,8 @@ class RotaryParams:
         lo=0.0,
         hi=0.1,
         desc="viscous friction torque per rpm (Eq. 9)",
-        source="paper Eq. 9 fit (per r/min, = 8.27e-4 N·m·s/rad)",
+        source="paper Eq. 9 fit (per r/min, = 8.27e-4 N·m·s/rad); range ±25 %: vane friction moves with lubrication, pressure and temperature (estimated)",
+        band=(6.495e-05, 0.0001083),
     )
     static_ratio: float = param(
         1.0,
@@ -438,7 +467,8 @@ class RotaryParams:
         lo=1.0,
         hi=3.0,
         desc="static friction torque / M_c (Eq. 10: f(0) = 0 read as sticking up to M_c)",
-        source="paper Eq. 10 (no breakaway measured)",
+        source="paper Eq. 10 (no breakaway measured); range up to 1.5: vane motors break away above their running friction (estimated)",
+        band=(1.0, 1.5),
     )
     V_m1: float = param(
         1.4e-5,
@@ -447,7 +477,8 @@ class RotaryParams:
         lo_open=True,
         hi=1e-3,
         desc="inlet chamber + tubing volume",
-        source="estimated (" + _PLANT_SHEET + ")",
+        source="estimated (" + _PLANT_SHEET + "); range ±50 % (estimated)",
+        band=(7e-06, 2.1e-05),
     )
     V_m2: float = param(
         1.0e-5,
@@ -456,7 +487,8 @@ class RotaryParams:
         lo_open=True,
         hi=1e-3,
         desc="exhaust chamber + port volume",
-        source="estimated: exhaust-side cells and port of a 1AM-size motor",
+        source="estimated: exhaust-side cells and port of a 1AM-size motor; range ±50 % (estimated)",
+        band=(5e-06, 1.5e-05),
     )
     A_ex: float = param(
         1.5e-5,
@@ -465,7 +497,8 @@ class RotaryParams:
         lo_open=True,
         hi=1e-3,
         desc="silencer orifice area (ISO 6358 with Eq. 12 C_d, b as valve)",
-        source="estimated: 1/8 NPT exhaust port (≈ 7 mm bore, 38 mm^2) throttled by a sintered silencer to ≈ 40 %",
+        source="estimated: 1/8 NPT exhaust port (≈ 7 mm bore, 38 mm^2) throttled by a sintered silencer to ≈ 40 %; range ±50 % (estimated)",
+        band=(7.5e-06, 2.25e-05),
     )
     k_leak: float = param(
         5e-10,
@@ -473,7 +506,8 @@ class RotaryParams:
         lo=0.0,
         hi=1e-6,
         desc="vane/side leakage inlet -> exhaust, laminar",
-        source="estimated: 5e-5 kg/s (≈ 2.5 l/min ANR) at 1 bar, ≈ 15 % of the 800 rpm consumption",
+        source="estimated: 5e-5 kg/s (≈ 2.5 l/min ANR) at 1 bar, ≈ 15 % of the 800 rpm consumption; range ×/÷ 2 (estimated)",
+        band=(2.5e-10, 1e-09),
     )
 
     def _check(self) -> None:
@@ -523,7 +557,8 @@ class PressureSensorParams:
         lo=0.0,
         hi=1.0,
         desc="output noise (1 σ)",
-        source="estimated: Huba gives no noise figure; 2 mV rms on 10 V is typical of amplified piezoresistive sensors",
+        source="estimated: Huba gives no noise figure; 2 mV rms on 10 V is typical of amplified piezoresistive sensors; range 0.5-5 mV (estimated)",
+        band=(0.0005, 0.005),
     )
     tau: float = param(
         2.3e-3,
@@ -532,7 +567,8 @@ class PressureSensorParams:
         lo_open=True,
         hi=0.1,
         desc="first-order time constant",
-        source="Huba 511: response < 5 ms read as 10-90 % rise, τ = 5 ms / 2.2",
+        source="Huba 511: response < 5 ms read as 10-90 % rise, τ = 5 ms / 2.2; range: '< 5 ms' is a bound, down to 0.5 ms (estimated)",
+        band=(0.0005, 0.0023),
     )
 
 
@@ -561,7 +597,8 @@ class LaserParams:
         lo_open=True,
         hi=0.1,
         desc="first-order time constant at the chosen response setting (1.5 ms)",
-        source="HG-C1200 response 1.5 ms read as 10-90 % rise, τ = 1.5 ms / 2.2",
+        source="HG-C1200 response 1.5 ms read as 10-90 % rise, τ = 1.5 ms / 2.2; range: up to 1.5 ms read as the time constant",
+        band=(0.00068, 0.0015),
     )
     sigma_m: float = param(
         86e-6,
@@ -569,7 +606,8 @@ class LaserParams:
         lo=0.0,
         hi=0.01,
         desc="displacement noise (1 σ) at the 1.5 ms setting",
-        source="estimated: repeatability 200 µm at the slowest (10 ms) setting read as ±3σ → 33 µm; × sqrt(10/1.5) for the 1.5 ms setting",
+        source="estimated: repeatability 200 µm at the slowest (10 ms) setting read as ±3σ → 33 µm; × sqrt(10/1.5) for the 1.5 ms setting; range: ±2σ reading (130 µm) down to a unit 40 % better than the ±3σ reading (50 µm), estimated",
+        band=(5e-05, 0.00013),
     )
 
 

@@ -1,0 +1,165 @@
+"""``pneu sweep``: experiments × gain sets over N plant samples, one tidy table and a summary."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, experiment_by_id
+
+NAME = "sweep"
+HELP = (
+    "run experiments over N plant samples drawn from plant.yaml's ranges (Latin hypercube or "
+    "Sobol, seeded), in parallel processes or on a Dask cluster: sweep.csv, summary, figures"
+)
+
+
+def add_executor_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the runs execute (shared with ``pneu paper --uncertainty``)."""
+    p.add_argument(
+        "--executor",
+        choices=("local", "serial", "dask"),
+        default="local",
+        help="local: one process per core (default); serial: this process; "
+        "dask: a Dask cluster (--address) or a local one",
+    )
+    p.add_argument(
+        "--workers", type=int, default=None, metavar="N", help="processes (default: the cores)"
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        metavar="tcp://HOST:8786",
+        help="Dask scheduler to run on (with --executor dask)",
+    )
+    p.add_argument("--sampler", choices=("lhs", "sobol"), default="lhs")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--samples", type=int, required=True, metavar="N", help="plant samples")
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of the design; sample s runs with seed+s"
+    )
+    p.add_argument(
+        "--experiment",
+        action="append",
+        default=[],
+        metavar="ID",
+        help="paper experiments to run (repeatable; default: all): "
+        + ", ".join(e.id for e in PAPER_EXPERIMENTS),
+    )
+    p.add_argument(
+        "--reference",
+        default=None,
+        metavar="KIND[:key=value,...]",
+        help="instead, one pneu run experiment with this reference (with --axis, --duration)",
+    )
+    p.add_argument("--axis", choices=("linear", "rotary"), default="linear")
+    p.add_argument("--duration", type=float, default=20.0, metavar="S")
+    p.add_argument("--window-start", type=float, default=None, metavar="S")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument(
+        "--controller",
+        action="append",
+        default=[],
+        help="keep only these controllers (repeatable): pid, ladrc, eso_smc, eso_smc_plus",
+    )
+    p.add_argument(
+        "--gains",
+        action="append",
+        default=[],
+        help="keep only these gain sets (repeatable): paper, retuned, design",
+    )
+    p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml with ranges")
+    p.add_argument(
+        "--config-dir",
+        default=None,
+        metavar="DIR",
+        help="directory with controllers.yaml and controllers_retuned.yaml (default: config/)",
+    )
+    p.add_argument("--no-safety", action="store_true", help="runs without the supervisor")
+    p.add_argument("--no-plots", action="store_true")
+    add_executor_arguments(p)
+
+
+def progress_printer(label: str):
+    start = time.monotonic()
+    last = [start]
+
+    def report(done: int, total: int) -> None:
+        now = time.monotonic()
+        if done == total or now - last[0] >= 10.0:
+            last[0] = now
+            print(f"  {label}: {done}/{total} runs, {now - start:.0f} s", file=sys.stderr)
+
+    return report
+
+
+def check_executor_args(args: argparse.Namespace) -> None:
+    if args.address is not None and args.executor != "dask":
+        raise ValueError(f"--address: {args.address!r} refused; allowed: with --executor dask")
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers: {args.workers} refused; allowed: an integer >= 1")
+
+
+def run(args: argparse.Namespace) -> int:
+    from pneu_control.sweep.engine import custom_experiment, plan_sweep, run_sweep
+    from pneu_control.sweep.report import write_sweep
+
+    if args.samples < 1:
+        raise ValueError(f"--samples: {args.samples} refused; allowed: an integer >= 1")
+    check_executor_args(args)
+    if args.reference and args.experiment:
+        raise ValueError("--reference: refused with --experiment; allowed: one or the other")
+    cfg = Path(args.config_dir) if args.config_dir else None
+    if args.reference:
+        exps = [
+            custom_experiment(
+                axis=args.axis,
+                reference=args.reference,
+                duration_s=args.duration,
+                window_start_s=args.window_start,
+                config_dir=cfg,
+            )
+        ]
+    else:
+        exps = [experiment_by_id(i) for i in args.experiment] or list(PAPER_EXPERIMENTS)
+    t0 = time.perf_counter()
+    plan = plan_sweep(
+        samples=args.samples,
+        seed=args.seed,
+        sampler=args.sampler,
+        experiments=exps,
+        controllers=args.controller,
+        gains=args.gains,
+        plant_file=args.plant,
+        config_dir=cfg,
+        sets=args.set,
+        safety=not args.no_safety,
+    )
+    print(
+        f"pneu sweep: {len(plan.tasks)} runs ({args.samples} plant samples × "
+        f"{plan.meta['runs_per_sample']} runs, {len(plan.factors)} factors, {args.sampler}, "
+        f"seed {args.seed}) on {args.executor}",
+        file=sys.stderr,
+    )
+    result = run_sweep(
+        plan,
+        executor=args.executor,
+        workers=args.workers,
+        address=args.address,
+        progress=progress_printer("sweep"),
+    )
+    _, _, md = write_sweep(result, args.out, plots=not args.no_plots)
+    print(md)
+    wall = time.perf_counter() - t0
+    print(
+        f"wrote {args.out}/sweep.csv, summary.json, summary.md in {wall:.1f} s "
+        f"({len(plan.tasks) / result.wall_s:.2f} runs/s, "
+        f"{plan.meta['simulated_s'] / result.wall_s:.0f} s simulated per s)",
+        file=sys.stderr,
+    )
+    return 0

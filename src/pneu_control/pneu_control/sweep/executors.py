@@ -1,0 +1,147 @@
+"""Where a sweep's runs execute: this process, local processes, or a Dask cluster.
+
+Every executor maps one picklable task function over the tasks and returns the
+results in task order, whatever order they finished in; each run is
+deterministic and single-threaded, so the table is the same bytes on any
+executor (tested).
+
+- ``serial``: in this process, one after the other.
+- ``local`` (default): :class:`concurrent.futures.ProcessPoolExecutor` with the
+  ``spawn`` start method (no fork of a process that may hold threads), one
+  worker per available core.
+- ``dask``: :mod:`distributed` -- ``address`` (``tcp://host:8786``) names a
+  running scheduler; without one a :class:`distributed.LocalCluster` (processes,
+  one thread each, loopback only) is started for the sweep and shut down after.
+  Workers must have the same pneu packages installed (the task function is sent
+  by name, not by value); ``Client.get_versions(check=True)`` refuses a mismatch
+  of Python or library versions first.
+
+A task that hangs or a worker that dies never hangs the sweep: every wait has
+a timeout (``timeout_s``, for the whole map).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from typing import Any
+
+__all__ = ["EXECUTORS", "SweepExecutorError", "default_workers", "map_tasks"]
+
+EXECUTORS = ("local", "serial", "dask")
+
+
+class SweepExecutorError(RuntimeError):
+    """The executor could not run the sweep (timeout, lost worker, no cluster)."""
+
+
+def default_workers() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def map_tasks(
+    fn: Callable[[Any], Any],
+    tasks: Sequence[Any],
+    *,
+    executor: str = "local",
+    workers: int | None = None,
+    address: str | None = None,
+    timeout_s: float = 24 * 3600.0,
+    progress: Callable[[int, int], None] | None = None,
+    client: Any | None = None,
+) -> list[Any]:
+    """``[fn(t) for t in tasks]``, on ``executor``; ``progress(done, total)`` as runs finish.
+
+    ``client``: an existing :class:`distributed.Client` (``executor="dask"``), e.g. a
+    test's in-process cluster; else one is made from ``address``.
+    """
+    if executor not in EXECUTORS:
+        raise ValueError(f"executor: {executor!r} refused; allowed: one of {', '.join(EXECUTORS)}")
+    if address is not None and executor != "dask":
+        raise ValueError(f"address: {address!r} refused; allowed: only with executor dask")
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers: {workers} refused; allowed: an integer >= 1")
+    total = len(tasks)
+    if executor == "serial" or total == 0:
+        out = []
+        for i, t in enumerate(tasks):
+            out.append(fn(t))
+            if progress is not None:
+                progress(i + 1, total)
+        return out
+    if executor == "local":
+        return _map_local(fn, tasks, workers or default_workers(), timeout_s, progress)
+    return _map_dask(fn, tasks, workers, address, timeout_s, progress, client)
+
+
+def _map_local(fn, tasks, workers, timeout_s, progress) -> list[Any]:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import TimeoutError as FuturesTimeout
+
+    out: list[Any] = [None] * len(tasks)
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx) as pool:
+        futs = {pool.submit(fn, t): i for i, t in enumerate(tasks)}
+        try:
+            for n, fut in enumerate(as_completed(futs, timeout=timeout_s), start=1):
+                out[futs[fut]] = fut.result()
+                if progress is not None:
+                    progress(n, len(tasks))
+        except FuturesTimeout:
+            for fut in futs:
+                fut.cancel()
+            raise SweepExecutorError(f"sweep: runs not finished after {timeout_s:g} s") from None
+    return out
+
+
+def _map_dask(fn, tasks, workers, address, timeout_s, progress, client) -> list[Any]:
+    try:
+        import distributed
+    except ImportError as err:  # an optional engine: say what to install
+        raise SweepExecutorError(
+            f"executor dask: {err}; install it with pip install distributed"
+        ) from None
+
+    if client is not None:
+        return _gather(distributed, client, fn, tasks, timeout_s, progress)
+    if address is not None:
+        try:
+            cl = distributed.Client(address, timeout=30)
+        except (OSError, TimeoutError) as err:
+            raise SweepExecutorError(f"executor dask: no scheduler at {address}: {err}") from None
+        with cl:
+            cl.get_versions(check=True)
+            return _gather(distributed, cl, fn, tasks, timeout_s, progress)
+    n = min(workers or default_workers(), len(tasks))
+    with (
+        distributed.LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+        ) as cluster,
+        distributed.Client(cluster) as cl,
+    ):
+        return _gather(distributed, cl, fn, tasks, timeout_s, progress)
+
+
+def _gather(distributed, client, fn, tasks, timeout_s, progress) -> list[Any]:
+    # pure=False: every task runs, even two with equal arguments
+    futs = client.map(fn, list(tasks), pure=False)
+    index = {f.key: i for i, f in enumerate(futs)}
+    out: list[Any] = [None] * len(tasks)
+    try:
+        done = distributed.as_completed(futs, timeout=timeout_s)
+        for n, fut in enumerate(done, start=1):
+            out[index[fut.key]] = fut.result(timeout=timeout_s)
+            if progress is not None:
+                progress(n, len(tasks))
+    except TimeoutError:
+        client.cancel(futs)
+        raise SweepExecutorError(f"sweep: runs not finished after {timeout_s:g} s") from None
+    return out
