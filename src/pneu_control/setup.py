@@ -25,6 +25,7 @@ setup(
         "numpy>=1.26",
         "PyYAML>=6.0",
         "matplotlib>=3.7",
+        "scipy>=1.11",  # pneu identify: least_squares
         "mcap-ros2-support>=0.5",  # pneu_control.experiment.fault_table checks bags with it
     ],
     zip_safe=True,

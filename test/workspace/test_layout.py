@@ -52,6 +52,7 @@ ROSDEP_PY = {
     "yaml": "python3-yaml",
     "numba": "python3-numba",
     "matplotlib": "python3-matplotlib",
+    "scipy": "python3-scipy",
 }
 # pip-only libraries (no rosdep key): must be in setup.py install_requires instead
 PIP_ONLY = {

@@ -147,7 +147,10 @@ def config_echo(spec: RunSpec) -> dict[str, Any]:
         "duration_s": spec.duration_s,
         "seed": spec.seed,
         "x0": spec.x0,
-        "controllers": {axis: to_dict(p) for axis, p in spec.controllers.items()},
+        "controllers": {
+            axis: p.to_dict() if hasattr(p, "to_dict") else to_dict(p)
+            for axis, p in spec.controllers.items()
+        },
         "windows": {axis: w.to_dict() for axis, w in spec.windows.items()},
         "plant": to_dict(spec.plant),
         "faults": [f.to_dict() for f in spec.faults],
@@ -194,11 +197,15 @@ def execute(
     bag: bool = True,
     progress: bool = False,
     bag_name: str = "run.mcap",
+    echo_overrides: dict[str, Any] | None = None,
 ) -> RunResult:
-    """Run ``spec``, write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP."""
+    """Run ``spec``, write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP.
+
+    ``echo_overrides`` replace entries of the recorded config (e.g. a blind
+    identification study hides the twin's parameters)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    echo = config_echo(spec)
+    echo = {**config_echo(spec), **(echo_overrides or {})}
     report = _progress_printer(spec.duration_s, spec.name) if progress else None
     with _sigterm_as_interrupt():
         if bag:

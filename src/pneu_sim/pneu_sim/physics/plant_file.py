@@ -22,7 +22,13 @@ from pneu_msgs_py.params.paths import config_file
 
 from pneu_sim.physics.params import PlantConfigError, PlantParams
 
-__all__ = ["dump_plant_yaml", "load_plant", "params_from_tree", "plant_to_yaml_tree"]
+__all__ = [
+    "dump_plant_yaml",
+    "load_plant",
+    "params_from_tree",
+    "plant_to_yaml_tree",
+    "plant_tree_yaml",
+]
 
 
 def _leaf_meta(cls: type) -> dict[str, dataclasses.Field]:
@@ -106,15 +112,22 @@ def plant_to_yaml_tree(p: Any) -> dict[str, Any]:
 
 def dump_plant_yaml(p: PlantParams | None = None) -> str:
     """YAML text of ``p`` (default: the built-in values) with a comment per leaf."""
-    import yaml
-
     p = validate(p if p is not None else PlantParams())
-    lines = [
+    header = [
         "# Plant of the linear-rotary pneumatic actuator twin (pneu_sim).",
         "# Each leaf: value, unit (must match the code), source (paper table, datasheet,",
         "# or 'estimated: why'). SI units, pressures absolute, except rotary.M_v (N*m/rpm, as",
         "# Table 1). Generated from pneu_sim.physics.params.PlantParams defaults; edit values freely.",
     ]
+    return plant_tree_yaml(plant_to_yaml_tree(p), header)
+
+
+def plant_tree_yaml(tree: Mapping[str, Any], header: list[str]) -> str:
+    """YAML text of a plant.yaml tree: ``header`` comment lines, then one flow-style line
+    per leaf (every key of a leaf kept, in its order)."""
+    import yaml
+
+    lines = list(header)
 
     def emit(tree: Mapping[str, Any], indent: str) -> None:
         for key, node in tree.items():
@@ -131,5 +144,5 @@ def dump_plant_yaml(p: PlantParams | None = None) -> str:
                 lines.append(f"{indent}{key}:")
                 emit(node, indent + "  ")
 
-    emit(plant_to_yaml_tree(p), "")
+    emit(tree, "")
     return "\n".join(lines) + "\n"

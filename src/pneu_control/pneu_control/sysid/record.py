@@ -1,0 +1,199 @@
+"""A bag as identification data: the voltages on the valves in each period and the samples.
+
+:func:`load_record` reads a pneu bag (``pneu excite`` in-process, the ROS
+exciter through the logger, or any ``pneu run`` / rig bag) and returns a
+:class:`Record`:
+
+- the samples k = 0..N-1 (SI, pressures absolute): ``p_c1``, ``p_c2``,
+  ``p_m1``, ``x``, ``theta``, ``omega``, NaN where a message is missing;
+- ``u[axis][k]``: the voltage held on the valve over period k (sample k to
+  k+1). DESIGN §3: the command answering sample k−1 (its header stamp) is
+  written at tick k, so ``u[k]`` = command(stamp_{k−1}); the neutral 5 V before
+  the first command; a missing command keeps the previous one (the DAQ holds
+  its output);
+- ``valid[axis]``: False from the first safety event of that axis on
+  (``/diagnostics``): while the supervisor overrides the command, the
+  voltage on the valve is not the recorded one;
+- the excitation design of each axis if the bag has one (metadata
+  ``pneu.excite``), used only to find its quiet segments.
+
+Nothing else from the metadata is read: a bag of a twin run carries the
+twin's parameters, and the identifier must not see them.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pneu_msgs_py.bag.errors import BagError, MissingTopicError
+from pneu_msgs_py.bag.reader import read_run
+from pneu_msgs_py.contract.samples import AXES, NEUTRAL_V
+from pneu_msgs_py.contract.topics import (
+    JOINT_STATE_TOPIC,
+    PRESSURE_TOPICS,
+    VALVE_COMMAND_TOPIC,
+)
+
+from pneu_control.experiment.bag_log import EXCITE_METADATA
+from pneu_control.sysid.design import ExcitationDesign, design_from_json
+
+__all__ = ["SIGNALS", "AXIS_SIGNALS", "Record", "load_record"]
+
+SIGNALS = ("p_c1", "p_c2", "p_m1", "x", "theta", "omega")
+# the signals each axis's identification and validation compare
+AXIS_SIGNALS = {"linear": ("x", "p_c1", "p_c2"), "rotary": ("omega", "p_m1")}
+_PRESSURE_FIELD = {"p_c1": "cylinder_1", "p_c2": "cylinder_2", "p_m1": "motor_in"}
+
+
+@dataclass
+class Record:
+    """One bag, ready for replay (see the module docstring)."""
+
+    path: str
+    name: str
+    stamp_ns: np.ndarray  # (N,) int64
+    y: dict[str, np.ndarray]  # SIGNALS -> (N,)
+    u: dict[str, np.ndarray]  # axis -> (N,) V held over period k
+    commanded: tuple[str, ...]  # axes with recorded commands
+    valid: dict[str, np.ndarray]  # axis -> (N,) bool
+    designs: dict[str, ExcitationDesign] = field(default_factory=dict)
+    period_s: float = 1e-3
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return len(self.stamp_ns)
+
+    @property
+    def t(self) -> np.ndarray:
+        return (self.stamp_ns - self.stamp_ns[0]) * 1e-9
+
+    def quiet_mask(self, axis: str, min_s: float = 0.5) -> np.ndarray:
+        """Samples where ``axis``'s valve voltage has not changed for ``min_s`` s (and stays so).
+
+        With a design: its ``hold`` segments (after their first ``min_s``);
+        else any run of an unchanged voltage at least 2·``min_s`` long.
+        """
+        t = self.t
+        mask = np.zeros(self.n, dtype=bool)
+        d = self.designs.get(axis)
+        if d is not None:
+            for s in d.segments:
+                if s.kind == "hold":
+                    mask |= (t >= s.t0_s + min_s) & (t < s.t1_s)
+            return mask & self.valid[axis]
+        u = self.u[axis]
+        n_min = int(round(2 * min_s / self.period_s))
+        change = np.flatnonzero(np.diff(u) != 0.0) + 1
+        bounds = np.concatenate(([0], change, [self.n]))
+        skip = int(round(min_s / self.period_s))
+        for a, b in itertools.pairwise(bounds):
+            if b - a >= n_min:
+                mask[a + skip : b] = True
+        return mask & self.valid[axis]
+
+
+def _aligned(stamps: np.ndarray, src: np.ndarray, values: np.ndarray) -> np.ndarray:
+    out = np.full(stamps.shape, math.nan)
+    if len(src) == 0:
+        return out
+    idx = np.clip(np.searchsorted(src, stamps), 0, len(src) - 1)
+    ok = src[idx] == stamps
+    out[ok] = np.asarray(values, dtype=float)[idx[ok]]
+    return out
+
+
+def _designs(metadata: dict[str, dict[str, str]], path: str) -> dict[str, ExcitationDesign]:
+    rec = metadata.get(EXCITE_METADATA)
+    if not rec or "designs_json" not in rec:
+        return {}
+    try:
+        doc = json.loads(rec["designs_json"])
+        return {axis: design_from_json(d) for axis, d in doc.items()}
+    except (json.JSONDecodeError, KeyError, TypeError) as err:
+        raise BagError(path, f"metadata {EXCITE_METADATA}.designs_json unreadable: {err}") from None
+
+
+def _safety_start(data, axis: str, stamps: np.ndarray) -> int | None:
+    """Sample index of the first supervisor event on ``axis`` (WARN or ERROR), if any."""
+    from pneu_control.analysis.run_analysis import safety_events
+
+    for stamp, ev_axis, _rule, level, _msg in sorted(safety_events(data)):
+        if level >= 1 and ev_axis in (axis, "all"):
+            return int(np.searchsorted(stamps, stamp))
+    return None
+
+
+def load_record(path: str | Path) -> Record:
+    """Read ``path`` (``.mcap`` or rosbag2 directory) into a :class:`Record`."""
+    path = str(path)
+    data = read_run(path)
+    js_lin = data.topics.get(JOINT_STATE_TOPIC["linear"])
+    js_rot = data.topics.get(JOINT_STATE_TOPIC["rotary"])
+    base = js_lin if js_lin is not None and len(js_lin) else js_rot
+    if base is None or not len(base):
+        raise MissingTopicError(path, "no sensor samples (/pneu/<axis>/joint_state)")
+    stamps = np.asarray(base.stamp_ns, dtype=np.int64)
+    notes: list[str] = []
+    y: dict[str, np.ndarray] = {}
+    for name, frame in _PRESSURE_FIELD.items():
+        topic = next(t for t, (_, fr) in PRESSURE_TOPICS.items() if fr == frame)
+        fp = data.topics.get(topic)
+        y[name] = (
+            _aligned(stamps, fp.stamp_ns, fp["fluid_pressure"])
+            if fp is not None
+            else np.full(len(stamps), math.nan)
+        )
+    y["x"] = (
+        _aligned(stamps, js_lin.stamp_ns, js_lin["position"])
+        if js_lin is not None
+        else np.full(len(stamps), math.nan)
+    )
+    if js_rot is not None:
+        y["theta"] = _aligned(stamps, js_rot.stamp_ns, js_rot["rotary.position"])
+        y["omega"] = _aligned(stamps, js_rot.stamp_ns, js_rot["rotary.velocity"])
+    else:
+        y["theta"] = y["omega"] = np.full(len(stamps), math.nan)
+    u: dict[str, np.ndarray] = {}
+    commanded = []
+    for axis in AXES:
+        cmd = data.topics.get(VALVE_COMMAND_TOPIC[axis])
+        held = np.full(len(stamps), NEUTRAL_V)
+        if cmd is not None and len(cmd):
+            commanded.append(axis)
+            c = _aligned(stamps, cmd.stamp_ns, cmd["effort"])  # answer to sample k
+            missing = int(np.count_nonzero(~np.isfinite(c)))
+            if missing:
+                notes.append(f"{axis}: {missing} samples without a command (previous one held)")
+            cur = NEUTRAL_V
+            for k in range(len(stamps) - 1):  # held over period k+1 = answer to sample k
+                if math.isfinite(c[k]):
+                    cur = c[k]
+                held[k + 1] = cur
+        u[axis] = held
+    valid = {}
+    for axis in AXES:
+        v = np.ones(len(stamps), dtype=bool)
+        i = _safety_start(data, axis, stamps)
+        if i is not None:
+            v[i:] = False
+            notes.append(f"{axis}: supervisor event at sample {i}: data after it not used")
+        valid[axis] = v
+    period = float(np.median(np.diff(stamps))) * 1e-9 if len(stamps) > 1 else 1e-3
+    return Record(
+        path=path,
+        name=Path(path).name,
+        stamp_ns=stamps,
+        y=y,
+        u=u,
+        commanded=tuple(commanded),
+        valid=valid,
+        designs=_designs(data.metadata, path),
+        period_s=period,
+        notes=notes,
+    )
