@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -37,7 +37,9 @@ from pneu_control.sysid.record import AXIS_SIGNALS, Record
 __all__ = ["AxisFit", "FitOptions", "fit_axis"]
 
 _OFFSET_WIDTH = 5e3  # Pa: z = 1 is one Huba accuracy band
-_OFFSET_BOUND = 3e4  # Pa
+# Huba 511: ±0.5 % FS = ±5 kPa; the bound allows 1.5x that, so an offset cannot
+# absorb what the supply pressure or the flow curve should explain
+_OFFSET_BOUND = 7.5e3  # Pa
 _PRESSURE_OF = {"linear": ("p_c1", "p_c2"), "rotary": ("p_m1",)}
 CORRELATED = 0.95
 
@@ -51,6 +53,8 @@ class FitOptions:
     ftol: float = 1e-3  # stop when a step lowers the cost by less than 0.1 %
     xtol: float = 1e-4
     params: tuple[str, ...] | None = None  # names to fit (default: every parameter of the axis)
+    short_segment_s: float = 0.2  # the flow-curve stage's smooth cost (see _scan_dead_band)
+    short_every: int = 3  # ... on every 3rd short segment
 
 
 @dataclass
@@ -114,14 +118,313 @@ def fit_axis(
     options: FitOptions | None = None,
     log: Callable[[str], None] = print,
 ) -> AxisFit:
-    """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``."""
+    """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``.
+
+    Two stages: first the valve's flow curve (scale and dead band: what sets
+    the operating points, and what a start far off gets most wrong) by
+    :func:`_scan_dead_band`, then every parameter by least squares from there
+    -- otherwise the friction, supply and exhaust parameters absorb a wrong
+    flow curve (a local minimum).
+    """
+    options = options or FitOptions()
+    names = options.params or tuple(p.name for p in model.AXIS_PARAMS[axis])
+    first = tuple(n for n in names if n.startswith("valve_") and n.split(".")[1] in _STAGE1)
+    start = None
+    if len(first) == 2:
+        log(f"  {axis}: stage 1, the valve's flow curve ({', '.join(first)})")
+        long_ = _Problem(axis, base, records, replace(options, params=first))
+        short = _Problem(
+            axis,
+            base,
+            records,
+            replace(options, params=first, segment_s={axis: options.short_segment_s}),
+            every=options.short_every,
+        )
+        z = _scan_dead_band(long_, short, log)
+        vals, offs = long_.unpack(z)
+        start = dict(zip(first, vals))
+        start.update(long_.offset_start(offs))
+        log(f"  {axis}: stage 2, every parameter")
+    return _Problem(axis, base, records, replace(options, params=names)).solve(start, log)
+
+
+_STAGE1 = ("Q_n", model.DEAD_BAND)
+
+
+class _Problem:
+    """The least-squares problem of one axis: parameters (as z), residuals, solve, statistics."""
+
+    def __init__(self, axis: str, base, records: list[Record], options: FitOptions, every: int = 1):
+        self.axis, self.base, self.options = axis, base, options
+        self.params = tuple(p for p in model.AXIS_PARAMS[axis] if p.name in options.params)
+        self.p0 = [model.base_value(base, p) for p in self.params]
+        bounds = []
+        for p, b in zip(self.params, self.p0):
+            lo, hi = p.lo, p.hi
+            if p.name.endswith("." + model.DEAD_BAND):
+                table = getattr(base, p.name.split(".")[0]).du_table
+                lo, hi = max(lo, -0.95 * table[1]), min(hi, 5.0 - table[-1])
+            bounds.append((p.to_z(lo, b), p.to_z(hi, b)))
+        used = []
+        for r in records:
+            seg = shooting.segments_of(r, axis, options.segment_s[axis])
+            if every > 1:
+                seg = shooting.Segments(seg.starts[::every], seg.lengths[::every])
+            if len(seg):
+                used.append((r, seg))
+        if not used:
+            raise ValueError(
+                f"{axis}: no usable data in the bags (axis not excited or all invalid)"
+            )
+        self.used = used
+        self.signals = AXIS_SIGNALS[axis]
+        self.pnames = _PRESSURE_OF[axis]
+        self.scale = {}
+        for name in self.signals:  # the signals' spreads: fixed residual weights
+            vals = np.concatenate([r.y[name][s.index] for r, s in used])
+            self.scale[name] = float(np.std(vals)) or 1.0
+        self.n_p = len(self.params)
+        self.n_off = len(self.pnames) * len(used)
+        dec = options.decimate
+        self.meas = [{n: r.y[n][s.index][::dec] for n in self.signals} for r, s in used]
+        self.pivot = _pivots(axis, base, self.params, used)
+        ob = _OFFSET_BOUND / _OFFSET_WIDTH
+        self.lo = np.array([b[0] for b in bounds] + [-ob] * self.n_off)
+        self.hi = np.array([b[1] for b in bounds] + [ob] * self.n_off)
+
+    def unpack(self, z: np.ndarray) -> tuple[list[float], list[dict[str, float]]]:
+        n_p, k = self.n_p, len(self.pnames)
+        vals = [p.from_z(float(zi), b) for p, zi, b in zip(self.params, z[:n_p], self.p0)]
+        for i_q, i_d, ratio in self.pivot:  # Q_n from the flow at the pivot and the dead band
+            vals[i_q] = vals[i_q] * ratio(vals[i_d])
+        offs = []
+        for j in range(len(self.used)):
+            zo = z[n_p + j * k : n_p + (j + 1) * k]
+            offs.append({name: float(v) * _OFFSET_WIDTH for name, v in zip(self.pnames, zo)})
+        return vals, offs
+
+    def offset_start(self, offs: list[dict[str, float]]) -> dict[str, float]:
+        return {
+            f"offset:{r.path}:{k}": v for (r, _s), o in zip(self.used, offs) for k, v in o.items()
+        }
+
+    def z_start(self, start: dict[str, float] | None) -> np.ndarray:
+        z = np.zeros(self.n_p + self.n_off)
+        if start:
+            vals = [start.get(p.name, b) for p, b in zip(self.params, self.p0)]
+            for i_q, i_d, ratio in self.pivot:
+                vals[i_q] = vals[i_q] / ratio(vals[i_d])
+            for i, (p, b) in enumerate(zip(self.params, self.p0)):
+                z[i] = p.to_z(vals[i], b)
+            k = len(self.pnames)
+            for j, (rec, _s) in enumerate(self.used):
+                for q, name in enumerate(self.pnames):
+                    z[self.n_p + j * k + q] = (
+                        start.get(f"offset:{rec.path}:{name}", 0.0) / _OFFSET_WIDTH
+                    )
+        return np.clip(z, self.lo, self.hi)
+
+    def residuals(self, z: np.ndarray) -> np.ndarray:
+        vals, offs = self.unpack(z)
+        plant = model.apply(self.base, self.params, vals)
+        parts = []
+        dec = self.options.decimate
+        for (r, s), m, off in zip(self.used, self.meas, offs):
+            sim = shooting.simulate(plant, r, s, off, self.axis)
+            for name in self.signals:
+                parts.append((m[name] - sim[name][::dec]) / self.scale[name])
+        return np.concatenate(parts)
+
+    def cost(self, z: np.ndarray) -> float:
+        r = self.residuals(z)
+        return 0.5 * float(r @ r)
+
+    def solve(self, start: dict[str, float] | None, log: Callable[[str], None]) -> AxisFit:
+        from scipy.optimize import least_squares
+
+        axis, params, opt = self.axis, self.params, self.options
+        z0 = self.z_start(start)
+        t0 = time.perf_counter()
+        r0 = self.residuals(z0)
+        cost0 = 0.5 * float(r0 @ r0)
+        n_eval = [0]
+
+        def tracked(z):
+            n_eval[0] += 1
+            r = self.residuals(z)
+            if n_eval[0] % (len(z) + 1) == 1:
+                vals, _ = self.unpack(z)
+                shown = ", ".join(f"{p.name.split('.')[-1]}={v:.4g}" for p, v in zip(params, vals))
+                log(
+                    f"  {axis} eval {n_eval[0]:4d}  cost {0.5 * float(r @ r):.5g}  "
+                    f"({time.perf_counter() - t0:.0f} s)  {shown}"
+                )
+            return r
+
+        res = least_squares(
+            tracked,
+            z0,
+            bounds=(self.lo, self.hi),
+            method="trf",
+            x_scale=1.0,
+            diff_step=opt.diff_step,
+            max_nfev=opt.max_nfev,
+            xtol=opt.xtol,
+            ftol=opt.ftol,
+        )
+        return self._statistics(res, cost0, time.perf_counter() - t0)
+
+    def _statistics(self, res, cost0: float, wall: float) -> AxisFit:
+        n_p = self.n_p
+        J, r = res.jac, res.fun
+        m_res, p_all = J.shape
+        s2 = float(r @ r) / max(m_res - p_all, 1)
+        taus = []  # residual autocorrelation, per record and signal, along time
+        k = 0
+        for m in self.meas:
+            for name in self.signals:
+                n = m[name].size
+                taus.append(_autocorr_time(r[k : k + n]))
+                k += n
+        infl = float(np.median(taus)) if taus else 1.0
+        cov_z = np.linalg.pinv(J.T @ J) * s2 * infl
+        sd_z = np.sqrt(np.maximum(np.diag(cov_z), 0.0))
+        vals, offs = self.unpack(res.x)
+        # the parameters' covariance through the (pivoted) map z -> p, to first order
+        G = np.zeros((n_p, n_p))
+        for i in range(n_p):
+            dz = np.zeros_like(res.x)
+            dz[i] = 1e-6
+            up, _ = self.unpack(res.x + dz)
+            dn, _ = self.unpack(res.x - dz)
+            G[:, i] = (np.array(up) - np.array(dn)) / 2e-6
+        cov_p = G @ cov_z[:n_p, :n_p] @ G.T
+        sigma = [float(v) for v in np.sqrt(np.maximum(np.diag(cov_p), 0.0))]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            corr = np.nan_to_num(cov_p / np.outer(sigma, sigma))
+        offsets, offsets_sigma = {}, {}
+        kk = len(self.pnames)
+        for j, ((rec, _s), off) in enumerate(zip(self.used, offs)):
+            offsets[rec.path] = off
+            offsets_sigma[rec.path] = {
+                name: float(sd_z[n_p + j * kk + q] * _OFFSET_WIDTH)
+                for q, name in enumerate(self.pnames)
+            }
+        return AxisFit(
+            axis=self.axis,
+            names=[p.name for p in self.params],
+            units=[p.unit for p in self.params],
+            base=self.p0,
+            value=vals,
+            sigma=sigma,
+            corr=corr,
+            offsets=offsets,
+            offsets_sigma=offsets_sigma,
+            cost_start=cost0,
+            cost=float(res.cost),
+            nfev=int(res.nfev),
+            wall_s=wall,
+            inflation=infl,
+            n_residuals=m_res,
+            status=str(res.message),
+            plant=model.apply(self.base, self.params, vals),
+        )
+
+
+def _scan_dead_band(long_: _Problem, short: _Problem, log: Callable[[str], None]) -> np.ndarray:
+    """The flow curve's start: the dead band by a scan along the cost's valley.
+
+    Every (Q_n, dead band) pair that gives the right flow where the valve mostly
+    ran lies in one long valley. Over a replay of seconds (``long_``) the true
+    pair sits in a narrow pit in it (the flow near the dead-band edge is very
+    sensitive); over short replays (``short``, 0.2 s) the valley is smooth. So
+    at each dead band on a grid (every 20 mV over the allowed range, then every
+    5 mV about the best) the pivot flow and the pressure offsets go to the
+    smooth valley's floor (two Gauss-Newton steps on ``short``, warm-started
+    from the last point) and the
+    long replay's cost scores the point; the best point starts stage 2.
+    """
+    ((i_q, i_d, _r),) = short.pivot
+    w = short.params[i_d].width
+    lo, hi = short.lo, short.hi
+    z = short.z_start(None)
+    t0 = time.perf_counter()
+
+    free = [i_q, *range(short.n_p, short.n_p + short.n_off)]  # the pivot flow and the offsets
+
+    def floor(zd: float, z: np.ndarray) -> np.ndarray:
+        z = z.copy()
+        z[i_d] = zd
+        r = short.residuals(z)
+        for _ in range(2):
+            J = np.empty((len(r), len(free)))
+            for c, i in enumerate(free):
+                zq = z.copy()
+                zq[i] += 1e-2
+                J[:, c] = (short.residuals(zq) - r) / 1e-2
+            step = np.linalg.lstsq(J, -r, rcond=None)[0]
+            z[free] = np.clip(z[free] + step, lo[free], hi[free])
+            r = short.residuals(z)
+        return z
+
+    best = (math.inf, z)
+    for step in (0.02, 0.005):
+        if step == 0.02:
+            grid = np.arange(lo[i_d], hi[i_d] + 1e-9, step / w)
+        else:
+            grid = np.clip(best[1][i_d] + np.arange(-4, 5) * step / w, lo[i_d], hi[i_d])
+        z = best[1] if step < 0.02 else z
+        for zd in grid:
+            z = floor(float(zd), z)
+            cost = long_.cost(z)
+            if cost < best[0]:
+                best = (cost, z.copy())
+        log(
+            f"  {long_.axis}: dead band scan every {1e3 * step:.0f} mV: best "
+            f"{best[1][i_d] * w:+.3f} V, cost {best[0]:.5g} ({time.perf_counter() - t0:.0f} s)"
+        )
+    return best[1]
+
+
+def _pivots(axis: str, base, params, used) -> list[tuple[int, int, Callable[[float], float]]]:
+    """Decouple a valve's flow scale from its dead band.
+
+    With flow = Q_n · table(du − db), every (Q_n, db) pair that gives the same
+    flow at the voltages the rig mostly ran at lies in one long curved valley
+    of the cost. So the fit moves Q_eff, the flow at the pivot du_ref (the
+    median |u − 5 V| of the records, outside the dead band), and the dead
+    band rotates the curve about it: Q_n = Q_eff · table(du_ref) / table(du_ref − db).
+    """
+    names = [p.name for p in params]
+    valve = "valve_" + axis
+    q, d = f"{valve}.Q_n", f"{valve}.{model.DEAD_BAND}"
+    if q not in names or d not in names:
+        return []
+    v = getattr(base, valve)
+    du_t, fl_t = np.asarray(v.du_table), np.asarray(v.flow_table)
+    du = np.concatenate([np.abs(r.u[axis] - 5.0) for r, _s in used])
+    du = du[du > du_t[1] + 0.05]
+    du_ref = float(np.median(du)) if len(du) else float(du_t[len(du_t) // 2])
+    f_ref = float(np.interp(du_ref, du_t, fl_t))
+
+    def ratio(db: float) -> float:
+        return f_ref / max(float(np.interp(du_ref - db, du_t, fl_t)), 1e-6)
+
+    return [(names.index(q), names.index(d), ratio)]
+
+
+def _fit(
+    axis: str,
+    base,
+    records: list[Record],
+    options: FitOptions,
+    log: Callable[[str], None],
+    start: dict[str, float] | None,
+    scan: bool = False,
+) -> AxisFit:
     from scipy.optimize import least_squares
 
-    options = options or FitOptions()
-
-    params = model.AXIS_PARAMS[axis]
-    if options.params is not None:
-        params = tuple(p for p in params if p.name in options.params)
+    params = tuple(p for p in model.AXIS_PARAMS[axis] if p.name in options.params)
     p0 = [model.base_value(base, p) for p in params]
     bounds = []
     for p, b in zip(params, p0):
@@ -146,8 +449,12 @@ def fit_axis(
     dec = options.decimate
     meas = [{n: r.y[n][s.index][::dec] for n in signals} for r, s in used]
 
+    pivot = _pivots(axis, base, params, used)
+
     def unpack(z: np.ndarray):
         vals = [p.from_z(float(zi), b) for p, zi, b in zip(params, z[:n_p], p0)]
+        for i_q, i_d, ratio in pivot:  # Q_n from the flow at the pivot and the dead band
+            vals[i_q] = vals[i_q] * ratio(vals[i_d])
         offs = []
         for j in range(len(used)):
             zo = z[n_p + j * len(pnames) : n_p + (j + 1) * len(pnames)]
@@ -165,9 +472,22 @@ def fit_axis(
         return np.concatenate(parts)
 
     z0 = np.zeros(n_p + n_off)
+    for i, (p, b) in enumerate(zip(params, p0)):
+        if start and p.name in start:
+            z0[i] = p.to_z(start[p.name], b)
+    for i_q, i_d, ratio in pivot:
+        if start and params[i_q].name in start:
+            db = start.get(params[i_d].name, 0.0)
+            z0[i_q] = params[i_q].to_z(start[params[i_q].name] / ratio(db), p0[i_q])
+    for j, (rec, _s) in enumerate(used):
+        for q, name in enumerate(pnames):
+            key = f"offset:{rec.path}:{name}"
+            if start and key in start:
+                z0[n_p + j * len(pnames) + q] = start[key] / _OFFSET_WIDTH
     lo = np.array([b[0] for b in bounds] + [-_OFFSET_BOUND / _OFFSET_WIDTH] * n_off)
     hi = np.array([b[1] for b in bounds] + [_OFFSET_BOUND / _OFFSET_WIDTH] * n_off)
     t0 = time.perf_counter()
+    z0 = np.clip(z0, lo, hi)
     r0 = residuals(z0)
     cost0 = 0.5 * float(r0 @ r0)
     n_eval = [0]
@@ -184,6 +504,8 @@ def fit_axis(
             )
         return r
 
+    if scan and pivot:
+        z0 = _scan_dead_band(residuals, z0, pivot[0][:2], lo, hi, params, log)
     res = least_squares(
         tracked,
         z0,
@@ -212,18 +534,23 @@ def fit_axis(
     JtJ = J.T @ J
     cov_z = np.linalg.pinv(JtJ) * s2 * infl
     sd_z = np.sqrt(np.maximum(np.diag(cov_z), 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov_z / np.outer(sd_z, sd_z)
-    corr = np.nan_to_num(corr)
     vals, offs = unpack(res.x)
-    sigma = []
-    for i, (p, v) in enumerate(zip(params, vals)):
-        # σ of p from σ of z (first order): log: dp = p w dz; lin: dp = w dz
-        sigma.append(abs(v) * p.width * sd_z[i] if p.transform == "log" else p.width * sd_z[i])
+    # the parameters' covariance through the (pivoted) map z -> p, to first order
+    G = np.zeros((n_p, n_p))
+    for i in range(n_p):
+        dz = np.zeros_like(res.x)
+        dz[i] = 1e-6
+        up, _ = unpack(res.x + dz)
+        dn, _ = unpack(res.x - dz)
+        G[:, i] = (np.array(up) - np.array(dn)) / 2e-6
+    cov_p = G @ cov_z[:n_p, :n_p] @ G.T
+    sigma = [float(v) for v in np.sqrt(np.maximum(np.diag(cov_p), 0.0))]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.nan_to_num(cov_p / np.outer(sigma, sigma))
     offsets, offsets_sigma = {}, {}
     for j, ((rec, _s), off) in enumerate(zip(used, offs)):
-        offsets[rec.name] = off
-        offsets_sigma[rec.name] = {
+        offsets[rec.path] = off
+        offsets_sigma[rec.path] = {
             name: float(sd_z[n_p + j * len(pnames) + q] * _OFFSET_WIDTH)
             for q, name in enumerate(pnames)
         }
