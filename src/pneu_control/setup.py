@@ -39,6 +39,7 @@ setup(
             "linear_controller = pneu_control.nodes.controller_node:main_linear",
             "rotary_controller = pneu_control.nodes.controller_node:main_rotary",
             "logger = pneu_control.nodes.logger_node:main",
+            "exciter = pneu_control.nodes.exciter_node:main",
         ],
     },
 )

@@ -4,8 +4,9 @@
 exciter through the logger, or any ``pneu run`` / rig bag) and returns a
 :class:`Record`:
 
-- the samples k = 0..N-1 (SI, pressures absolute): ``p_c1``, ``p_c2``,
-  ``p_m1``, ``x``, ``theta``, ``omega``, NaN where a message is missing;
+- the samples k = 0..N-1 on the sample clock's grid (SI, pressures
+  absolute): ``p_c1``, ``p_c2``, ``p_m1``, ``x``, ``theta``, ``omega``, NaN
+  where a message is missing;
 - ``u[axis][k]``: the voltage held on the valve over period k (sample k to
   k+1). DESIGN §3: the command answering sample k−1 (its header stamp) is
   written at tick k, so ``u[k]`` = command(stamp_{k−1}); the neutral 5 V before
@@ -15,7 +16,8 @@ exciter through the logger, or any ``pneu run`` / rig bag) and returns a
   (``/diagnostics``): while the supervisor overrides the command, the
   voltage on the valve is not the recorded one;
 - the excitation design of each axis if the bag has one (metadata
-  ``pneu.excite``), used only to find its quiet segments.
+  ``pneu.excite``, or the exciter node's parameters as the logger records
+  them), used to cut the replays and find the quiet segments.
 
 Nothing else from the metadata is read: a bag of a twin run carries the
 twin's parameters, and the identifier must not see them.
@@ -43,6 +45,8 @@ from pneu_control.experiment.bag_log import EXCITE_METADATA
 from pneu_control.sysid.design import ExcitationDesign, design_from_json
 
 __all__ = ["SIGNALS", "AXIS_SIGNALS", "Record", "load_record"]
+
+EXCITER_PARAMS = "pneu.params/pneu_exciter"  # the logger's record of the exciter node
 
 SIGNALS = ("p_c1", "p_c2", "p_m1", "x", "theta", "omega")
 # the signals each axis's identification and validation compare
@@ -109,11 +113,21 @@ def _aligned(stamps: np.ndarray, src: np.ndarray, values: np.ndarray) -> np.ndar
 
 
 def _designs(metadata: dict[str, dict[str, str]], path: str) -> dict[str, ExcitationDesign]:
+    """The designs of an in-process run (``pneu.excite``) or of the ROS exciter node (its
+    ``design_json`` parameter, recorded by the logger as ``pneu.params/pneu_exciter``)."""
     rec = metadata.get(EXCITE_METADATA)
-    if not rec or "designs_json" not in rec:
+    text = rec.get("designs_json") if rec else None
+    if text is None:
+        node = metadata.get(EXCITER_PARAMS) or {}
+        if "design_json" in node:
+            try:
+                text = json.loads(node["design_json"])  # the logger stores values as JSON
+            except json.JSONDecodeError:
+                text = None
+    if not text:
         return {}
     try:
-        doc = json.loads(rec["designs_json"])
+        doc = json.loads(text)
         return {axis: design_from_json(d) for axis, d in doc.items()}
     except (json.JSONDecodeError, KeyError, TypeError) as err:
         raise BagError(path, f"metadata {EXCITE_METADATA}.designs_json unreadable: {err}") from None
@@ -138,8 +152,13 @@ def load_record(path: str | Path) -> Record:
     base = js_lin if js_lin is not None and len(js_lin) else js_rot
     if base is None or not len(base):
         raise MissingTopicError(path, "no sensor samples (/pneu/<axis>/joint_state)")
-    stamps = np.asarray(base.stamp_ns, dtype=np.int64)
+    seen = np.asarray(base.stamp_ns, dtype=np.int64)
     notes: list[str] = []
+    # the sample clock's grid from the first to the last stamp: a lost message is a NaN
+    period_ns = int(np.median(np.diff(seen))) if len(seen) > 1 else 1_000_000
+    stamps = np.arange(int(seen[0]), int(seen[-1]) + 1, period_ns, dtype=np.int64)
+    if len(stamps) > len(seen):
+        notes.append(f"{len(stamps) - len(seen)} of {len(stamps)} samples missing (lost messages)")
     y: dict[str, np.ndarray] = {}
     for name, frame in _PRESSURE_FIELD.items():
         topic = next(t for t, (_, fr) in PRESSURE_TOPICS.items() if fr == frame)
@@ -160,6 +179,7 @@ def load_record(path: str | Path) -> Record:
     else:
         y["theta"] = y["omega"] = np.full(len(stamps), math.nan)
     u: dict[str, np.ndarray] = {}
+    unknown: dict[str, np.ndarray] = {}
     commanded = []
     for axis in AXES:
         cmd = data.topics.get(VALVE_COMMAND_TOPIC[axis])
@@ -167,24 +187,31 @@ def load_record(path: str | Path) -> Record:
         if cmd is not None and len(cmd):
             commanded.append(axis)
             c = _aligned(stamps, cmd.stamp_ns, cmd["effort"])  # answer to sample k
-            missing = int(np.count_nonzero(~np.isfinite(c)))
-            if missing:
-                notes.append(f"{axis}: {missing} samples without a command (previous one held)")
-            cur = NEUTRAL_V
-            for k in range(len(stamps) - 1):  # held over period k+1 = answer to sample k
-                if math.isfinite(c[k]):
-                    cur = c[k]
-                held[k + 1] = cur
+            lost = ~np.isfinite(c)
+            lost[-1] = False  # the last sample's answer is never applied
+            if lost.any():
+                notes.append(
+                    f"{axis}: {int(lost.sum())} samples without a recorded command: the "
+                    "periods after them are not used (the voltage on the valve is unknown)"
+                )
+                unknown[axis] = np.concatenate(([False], lost[:-1]))
+            # held over period k+1 = the answer to sample k; a lost one: the previous held
+            idx = np.where(np.isfinite(c), np.arange(len(c)), -1)
+            idx = np.maximum.accumulate(idx)
+            last = np.where(idx >= 0, c[np.maximum(idx, 0)], NEUTRAL_V)
+            held[1:] = last[:-1]
         u[axis] = held
     valid = {}
     for axis in AXES:
         v = np.ones(len(stamps), dtype=bool)
+        if axis in unknown:
+            v &= ~unknown[axis]
         i = _safety_start(data, axis, stamps)
         if i is not None:
             v[i:] = False
             notes.append(f"{axis}: supervisor event at sample {i}: data after it not used")
         valid[axis] = v
-    period = float(np.median(np.diff(stamps))) * 1e-9 if len(stamps) > 1 else 1e-3
+    period = period_ns * 1e-9
     return Record(
         path=path,
         name=Path(path).name,
