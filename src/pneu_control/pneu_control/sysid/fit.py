@@ -120,35 +120,42 @@ def fit_axis(
 ) -> AxisFit:
     """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``.
 
-    Two stages: first the valve's flow curve (scale and dead band: what sets
-    the operating points, and what a start far off gets most wrong) by
-    :func:`_scan_dead_band`, then every parameter by least squares from there
-    -- otherwise the friction, supply and exhaust parameters absorb a wrong
-    flow curve (a local minimum).
+    Stage 1: the valve's flow curve (scale and dead band: what sets the
+    operating points, and what a start far off gets most wrong) by
+    :func:`_scan_dead_band`; stage 2: every parameter by least squares from
+    there -- otherwise the friction, supply and exhaust parameters absorb a
+    wrong flow curve (a local minimum).
     """
     options = options or FitOptions()
     names = options.params or tuple(p.name for p in model.AXIS_PARAMS[axis])
     first = tuple(n for n in names if n.startswith("valve_") and n.split(".")[1] in _STAGE1)
-    start = None
-    if len(first) == 2:
-        log(f"  {axis}: stage 1, the valve's flow curve ({', '.join(first)})")
-        long_ = _Problem(axis, base, records, replace(options, params=first))
-        short = _Problem(
-            axis,
-            base,
-            records,
-            replace(options, params=first, segment_s={axis: options.short_segment_s}),
-            every=options.short_every,
-        )
-        z = _scan_dead_band(long_, short, log)
-        vals, offs = long_.unpack(z)
-        start = dict(zip(first, vals))
-        start.update(long_.offset_start(offs))
-        log(f"  {axis}: stage 2, every parameter")
-    return _Problem(axis, base, records, replace(options, params=names)).solve(start, log)
+    full = _Problem(axis, base, records, replace(options, params=names))
+    if not {f"{'valve_' + axis}.Q_n", f"valve_{axis}.{model.DEAD_BAND}"} <= set(first):
+        return full.solve(None, log)
+    log(f"  {axis}: stage 1, the valve's flow curve ({', '.join(first)})")
+    start, _ = _flow_curve_start(axis, base, records, options, first, {}, log)
+    log(f"  {axis}: stage 2, every parameter")
+    return full.solve(start, log)
 
 
-_STAGE1 = ("Q_n", model.DEAD_BAND)
+def _flow_curve_start(axis, base, records, options, first, offsets, log):
+    """Stage 1 on ``base``: the start values of the flow curve (and offsets) and their cost."""
+    long_ = _Problem(axis, base, records, replace(options, params=first))
+    short = _Problem(
+        axis,
+        base,
+        records,
+        replace(options, params=first, segment_s={axis: options.short_segment_s}),
+        every=options.short_every,
+    )
+    z, cost = _scan_dead_band(long_, short, log, offsets)
+    vals, offs = long_.unpack(z)
+    start = dict(zip(first, vals))
+    start.update(long_.offset_start(offs))
+    return start, cost
+
+
+_STAGE1 = ("Q_n", model.DEAD_BAND, "leak_fraction")
 
 
 class _Problem:
@@ -331,26 +338,32 @@ class _Problem:
         )
 
 
-def _scan_dead_band(long_: _Problem, short: _Problem, log: Callable[[str], None]) -> np.ndarray:
+def _scan_dead_band(
+    long_: _Problem, short: _Problem, log: Callable[[str], None], offsets: dict[str, float]
+) -> tuple[np.ndarray, float]:
     """The flow curve's start: the dead band by a scan along the cost's valley.
 
     Every (Q_n, dead band) pair that gives the right flow where the valve mostly
     ran lies in one long valley. Over a replay of seconds (``long_``) the true
     pair sits in a narrow pit in it (the flow near the dead-band edge is very
     sensitive); over short replays (``short``, 0.2 s) the valley is smooth. So
-    at each dead band on a grid (every 20 mV over the allowed range, then every
-    5 mV about the best) the pivot flow and the pressure offsets go to the
-    smooth valley's floor (two Gauss-Newton steps on ``short``, warm-started
-    from the last point) and the
+    at each dead band on a grid (every 25 mV over the allowed range, then every
+    5 mV about the best) the pivot flow, the centre leakage (it acts where the
+    dead band does, near 5 V) and the pressure offsets go to the smooth
+    valley's floor (two Gauss-Newton steps on ``short``, warm-started from the
+    last point) and the
     long replay's cost scores the point; the best point starts stage 2.
     """
-    ((i_q, i_d, _r),) = short.pivot
+    ((_i_q, i_d, _r),) = short.pivot
     w = short.params[i_d].width
     lo, hi = short.lo, short.hi
-    z = short.z_start(None)
+    z = short.z_start(offsets)
     t0 = time.perf_counter()
 
-    free = [i_q, *range(short.n_p, short.n_p + short.n_off)]  # the pivot flow and the offsets
+    # the pivot flow, the other stage-1 parameters (the centre leakage) and the offsets
+    free = [i for i in range(short.n_p) if i != i_d] + list(
+        range(short.n_p, short.n_p + short.n_off)
+    )
 
     def floor(zd: float, z: np.ndarray) -> np.ndarray:
         z = z.copy()
@@ -368,12 +381,14 @@ def _scan_dead_band(long_: _Problem, short: _Problem, log: Callable[[str], None]
         return z
 
     best = (math.inf, z)
-    for step in (0.02, 0.005):
-        if step == 0.02:
+    for step in (0.025, 0.005):
+        if step == 0.025:
             grid = np.arange(lo[i_d], hi[i_d] + 1e-9, step / w)
         else:
-            grid = np.clip(best[1][i_d] + np.arange(-4, 5) * step / w, lo[i_d], hi[i_d])
-        z = best[1] if step < 0.02 else z
+            grid = np.clip(
+                best[1][i_d] + np.array([-3, -2, -1, 1, 2, 3]) * step / w, lo[i_d], hi[i_d]
+            )
+        z = best[1] if step < 0.025 else z
         for zd in grid:
             z = floor(float(zd), z)
             cost = long_.cost(z)
@@ -383,7 +398,7 @@ def _scan_dead_band(long_: _Problem, short: _Problem, log: Callable[[str], None]
             f"  {long_.axis}: dead band scan every {1e3 * step:.0f} mV: best "
             f"{best[1][i_d] * w:+.3f} V, cost {best[0]:.5g} ({time.perf_counter() - t0:.0f} s)"
         )
-    return best[1]
+    return best[1], best[0]
 
 
 def _pivots(axis: str, base, params, used) -> list[tuple[int, int, Callable[[float], float]]]:
