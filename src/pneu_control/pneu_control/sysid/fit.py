@@ -201,7 +201,10 @@ class _Problem:
 
     def unpack(self, z: np.ndarray) -> tuple[list[float], list[dict[str, float]]]:
         n_p, k = self.n_p, len(self.pnames)
-        vals = [p.from_z(float(zi), b) for p, zi, b in zip(self.params, z[:n_p], self.p0)]
+        vals = [
+            min(max(p.from_z(float(zi), b), p.lo), p.hi)  # rounding at a bound
+            for p, zi, b in zip(self.params, z[:n_p], self.p0)
+        ]
         for i_q, i_d, ratio in self.pivot:  # Q_n from the flow at the pivot and the dead band
             vals[i_q] = vals[i_q] * ratio(vals[i_d])
         offs = []
@@ -348,10 +351,11 @@ def _scan_dead_band(
     pair sits in a narrow pit in it (the flow near the dead-band edge is very
     sensitive); over short replays (``short``, 0.2 s) the valley is smooth. So
     at each dead band on a grid (every 25 mV over the allowed range, then every
-    5 mV about the best) the pivot flow, the centre leakage (it acts where the
+    5 mV about the best; the fine steps fixed from the coarse best) the pivot flow, the centre leakage (it acts where the
     dead band does, near 5 V) and the pressure offsets go to the smooth
-    valley's floor (two Gauss-Newton steps on ``short``, warm-started from the
-    last point) and the
+    valley's floor (damped Gauss-Newton steps on ``short``: converged at the
+    start's dead band, then warm-started point to point walking away from it
+    both ways -- a continuation along the valley) and the
     long replay's cost scores the point; the best point starts stage 2.
     """
     ((_i_q, i_d, _r),) = short.pivot
@@ -365,39 +369,55 @@ def _scan_dead_band(
         range(short.n_p, short.n_p + short.n_off)
     )
 
-    def floor(zd: float, z: np.ndarray) -> np.ndarray:
+    def floor(zd: float, z: np.ndarray, steps: int = 2) -> np.ndarray:
         z = z.copy()
         z[i_d] = zd
         r = short.residuals(z)
-        for _ in range(2):
+        for _ in range(steps):
             J = np.empty((len(r), len(free)))
             for c, i in enumerate(free):
                 zq = z.copy()
                 zq[i] += 1e-2
                 J[:, c] = (short.residuals(zq) - r) / 1e-2
-            step = np.linalg.lstsq(J, -r, rcond=None)[0]
+            # damped (Levenberg) and limited: a direction the short replays hardly see
+            # (the cylinder's slow leakage) must not run away
+            JtJ = J.T @ J
+            damp = 1e-3 * np.diag(np.diag(JtJ)) + 1e-12 * np.eye(len(free))
+            step = np.clip(np.linalg.solve(JtJ + damp, -J.T @ r), -1.0, 1.0)
             z[free] = np.clip(z[free] + step, lo[free], hi[free])
             r = short.residuals(z)
         return z
 
-    best = (math.inf, z)
-    for step in (0.025, 0.005):
-        if step == 0.025:
-            grid = np.arange(lo[i_d], hi[i_d] + 1e-9, step / w)
-        else:
-            grid = np.clip(
-                best[1][i_d] + np.array([-3, -2, -1, 1, 2, 3]) * step / w, lo[i_d], hi[i_d]
-            )
-        z = best[1] if step < 0.025 else z
-        for zd in grid:
+    # continuation: converge at the start's dead band, then walk the valley floor both ways
+    z0 = floor(float(np.clip(z[i_d], lo[i_d], hi[i_d])), z, steps=5)
+    best = (long_.cost(z0), z0)
+    coarse = 0.025 / w
+    for direction in (1.0, -1.0):
+        z = z0
+        zd = z0[i_d] + direction * coarse
+        while lo[i_d] - 1e-9 <= zd <= hi[i_d] + 1e-9:
             z = floor(float(zd), z)
             cost = long_.cost(z)
             if cost < best[0]:
                 best = (cost, z.copy())
-        log(
-            f"  {long_.axis}: dead band scan every {1e3 * step:.0f} mV: best "
-            f"{best[1][i_d] * w:+.3f} V, cost {best[0]:.5g} ({time.perf_counter() - t0:.0f} s)"
-        )
+            zd += direction * coarse
+    log(
+        f"  {long_.axis}: dead band scan every 25 mV: best {best[1][i_d] * w:+.3f} V, "
+        f"cost {best[0]:.5g} ({time.perf_counter() - t0:.0f} s)"
+    )
+    centre = best[1]
+    for direction in (1.0, -1.0):  # then every 5 mV about the best
+        z = centre
+        for k in (1, 2, 3):
+            zd = float(np.clip(centre[i_d] + direction * k * 0.005 / w, lo[i_d], hi[i_d]))
+            z = floor(zd, z)
+            cost = long_.cost(z)
+            if cost < best[0]:
+                best = (cost, z.copy())
+    log(
+        f"  {long_.axis}: dead band scan every 5 mV: best {best[1][i_d] * w:+.3f} V, "
+        f"cost {best[0]:.5g} ({time.perf_counter() - t0:.0f} s)"
+    )
     return best[1], best[0]
 
 
