@@ -5,9 +5,8 @@ from __future__ import annotations
 import math
 
 import pytest
-from pneu_msgs_py.params.core import ParamError
-
 from pneu_control.sysid.design import design_for, design_from_json
+from pneu_msgs_py.params.core import ParamError
 
 
 @pytest.mark.parametrize("axis", ["linear", "rotary"])

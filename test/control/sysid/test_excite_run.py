@@ -6,11 +6,10 @@ import json
 
 import numpy as np
 import pytest
-from pneu_sim.physics.params import PlantParams
-
 from pneu_control.sysid.design import design_from_json
 from pneu_control.sysid.excite import excitation_spec, run_excitation
 from pneu_control.sysid.record import load_record
+from pneu_sim.physics.params import PlantParams
 
 
 @pytest.fixture(scope="module")

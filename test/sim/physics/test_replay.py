@@ -14,7 +14,11 @@ from pneu_sim.physics.plant import Plant
 def _quiet(p: PlantParams) -> PlantParams:
     return with_updates(
         p,
-        {"sensors.pressure.sigma_v": 0.0, "sensors.pressure.accuracy_fs": 0.0, "sensors.laser.sigma_m": 0.0},
+        {
+            "sensors.pressure.sigma_v": 0.0,
+            "sensors.pressure.accuracy_fs": 0.0,
+            "sensors.laser.sigma_m": 0.0,
+        },
     )
 
 
@@ -67,7 +71,9 @@ def test_spool_trajectory_is_the_kernels_spool():
     for i in range(len(u)):
         assert traj[i].tolist() == [st[k.S_SL], st[k.S_SDL], st[k.S_YL]]
         for _ in range(p.sim.n_sub):
-            k.spool_step.py_func(st, prm, k.P_VALVE_L, k.S_SL, k.S_SDL, k.S_YL, k.ao_value(prm, u[i]))
+            k.spool_step.py_func(
+                st, prm, k.P_VALVE_L, k.S_SL, k.S_SDL, k.S_YL, k.ao_value(prm, u[i])
+            )
 
 
 def test_exhaust_pressure_balances_the_silencer():
