@@ -152,14 +152,24 @@ def identify_b0(axis: str, plant_params, *, seeds: tuple[int, ...] = (0, 1, 2)) 
     return float(np.mean(estimates))
 
 
+# PID grid per axis: decades of kp about the paper's, decades of ki/kp about the paper's ratio.
+# Rotary: widened (8 x 6 points still) until the optimum is inside -- on the first span
+# (-3..0.5, -1.5..1) it sat on the low-kp, high-ki/kp corner.
+PID_SPAN = {
+    "linear": ((-3.0, 0.5), (-1.5, 1.0)),
+    "rotary": ((-5.0, -1.5), (-0.5, 2.5)),
+}
+
+
 def grid_for(algorithm: str, axis: str, paper: Any) -> list[dict[str, float]]:
     """The fixed search grid (dotted overrides) of one algorithm; 48 points each."""
     points: list[dict[str, float]] = []
     if algorithm == "pid":
         kd_over_kp = paper.pid.kd / paper.pid.kp
         ti_ratio = paper.pid.ki / paper.pid.kp
-        for kp in paper.pid.kp * np.logspace(-3.0, 0.5, 8):
-            for r in ti_ratio * np.logspace(-1.5, 1.0, 6):
+        (k0, k1), (r0, r1) = PID_SPAN[axis]
+        for kp in paper.pid.kp * np.logspace(k0, k1, 8):
+            for r in ti_ratio * np.logspace(r0, r1, 6):
                 points.append(
                     {"pid.kp": float(kp), "pid.ki": float(kp * r), "pid.kd": float(kp * kd_over_kp)}
                 )
