@@ -124,7 +124,9 @@ def fit_axis(
     operating points, and what a start far off gets most wrong) by
     :func:`_scan_dead_band`; stage 2: every parameter by least squares from
     there -- otherwise the friction, supply and exhaust parameters absorb a
-    wrong flow curve (a local minimum).
+    wrong flow curve (a local minimum). When stage 2 moves the dead band away
+    from the scan's pick, the scan runs again with the other parameters as
+    fitted (stage 2 again if it finds a lower cost elsewhere).
     """
     options = options or FitOptions()
     names = options.params or tuple(p.name for p in model.AXIS_PARAMS[axis])
@@ -135,7 +137,25 @@ def fit_axis(
     log(f"  {axis}: stage 1, the valve's flow curve ({', '.join(first)})")
     start, _ = _flow_curve_start(axis, base, records, options, first, {}, log)
     log(f"  {axis}: stage 2, every parameter")
-    return full.solve(start, log)
+    fit = full.solve(start, log)
+    # The scan saw the other parameters at their start values; when stage 2 moved the dead
+    # band away from its pick, those biased it (a wrong inertia, say): scan again with the
+    # fitted values, and run stage 2 once more if that finds a lower cost elsewhere.
+    db = f"valve_{axis}.{model.DEAD_BAND}"
+    d_fit = fit.value[fit.names.index(db)]
+    if abs(d_fit - start[db]) <= 0.01:
+        return fit
+    others = [p for p in model.AXIS_PARAMS[axis] if p.name in names and p.name not in first]
+    fitted = dict(zip(fit.names, fit.value))
+    base2 = model.apply(base, tuple(others), [fitted[p.name] for p in others])
+    offs = {f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()}
+    log(f"  {axis}: stage 1 again, the other parameters as fitted")
+    start2, cost2 = _flow_curve_start(axis, base2, records, options, first, offs, log)
+    if cost2 >= fit.cost or abs(start2[db] - d_fit) <= 0.005:
+        return fit
+    log(f"  {axis}: stage 2 again, from dead band {start2[db]:+.3f} V")
+    fit2 = full.solve({**fitted, **offs, **start2}, log)
+    return fit2 if fit2.cost < fit.cost else fit
 
 
 def _flow_curve_start(axis, base, records, options, first, offsets, log):
