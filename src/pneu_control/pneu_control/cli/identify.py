@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axis", choices=("linear", "rotary", "both"), default=None,
                    help="axes to identify (default: every excited axis in the bags)")  # fmt: skip
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
-    p.add_argument("--max-steps", type=int, default=40, metavar="N", help="residual evaluations cap per Jacobian-free step")  # fmt: skip
+    p.add_argument("--max-steps", type=int, default=40, metavar="N", help="cap on the least-squares function evaluations of each stage")  # fmt: skip
 
 
 def _resolve(bag: str) -> str:
