@@ -19,8 +19,10 @@ exciter through the logger, or any ``pneu run`` / rig bag) and returns a
   ``pneu.excite``, or the exciter node's parameters as the logger records
   them), used to cut the replays and find the quiet segments.
 
-Nothing else from the metadata is read: a bag of a twin run carries the
-twin's parameters, and the identifier must not see them.
+Besides, for ``pneu validate``'s closed-loop replay, the controllers a
+``pneu run`` bag ran (``pneu.run``'s ``controllers`` entry). Nothing else from
+the metadata is read: a bag of a twin run carries the twin's parameters, and
+the identifier must not see them.
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ class Record:
     commanded: tuple[str, ...]  # axes with recorded commands
     valid: dict[str, np.ndarray]  # axis -> (N,) bool
     designs: dict[str, ExcitationDesign] = field(default_factory=dict)
+    controllers: dict[str, dict] = field(default_factory=dict)  # a pneu run's controller params
     period_s: float = 1e-3
     notes: list[str] = field(default_factory=list)
 
@@ -131,6 +134,18 @@ def _designs(metadata: dict[str, dict[str, str]], path: str) -> dict[str, Excita
         return {axis: design_from_json(d) for axis, d in doc.items()}
     except (json.JSONDecodeError, KeyError, TypeError) as err:
         raise BagError(path, f"metadata {EXCITE_METADATA}.designs_json unreadable: {err}") from None
+
+
+def _controllers(metadata: dict[str, dict[str, str]]) -> dict[str, dict]:
+    """Only the ``controllers`` entry of the run's config (never its plant)."""
+    from pneu_control.experiment.bag_log import RUN_METADATA
+
+    try:
+        ctrls = json.loads((metadata.get(RUN_METADATA) or {}).get("config_json", "{}"))
+        ctrls = ctrls.get("controllers") or {}
+    except (json.JSONDecodeError, AttributeError):
+        return {}
+    return {a: c for a, c in ctrls.items() if isinstance(c, dict) and "segments" not in c}
 
 
 def _safety_start(data, axis: str, stamps: np.ndarray) -> int | None:
@@ -221,6 +236,7 @@ def load_record(path: str | Path) -> Record:
         commanded=tuple(commanded),
         valid=valid,
         designs=_designs(data.metadata, path),
+        controllers=_controllers(data.metadata),
         period_s=period,
         notes=notes,
     )

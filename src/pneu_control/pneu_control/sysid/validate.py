@@ -88,17 +88,15 @@ def _recorded_controllers(rec: Record) -> dict[str, Any] | None:
     """The controllers a bag ran: its excitation designs, or a pneu run's controller params."""
     if rec.designs:
         return dict(rec.designs)
-    from pneu_msgs_py.bag.reader import read_run
-    from pneu_msgs_py.params.core import from_dict
+    from pneu_msgs_py.params.core import ParamError, from_dict
 
-    from pneu_control.analysis.run_analysis import run_config
     from pneu_control.controller.params import AxisControllerParams
 
-    cfg = run_config(read_run(rec.path, topics=()))
-    ctrls = cfg.get("controllers") or {}
     try:
-        return {a: from_dict(AxisControllerParams, c, strict=False) for a, c in ctrls.items()}
-    except Exception:
+        return {
+            a: from_dict(AxisControllerParams, c, strict=False) for a, c in rec.controllers.items()
+        }
+    except (ParamError, TypeError, ValueError):
         return None
 
 
