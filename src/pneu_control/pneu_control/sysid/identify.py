@@ -221,6 +221,14 @@ def identify(
     )
 
 
+def _core_leaves(tree: Any) -> Any:
+    if isinstance(tree, dict):
+        if "value" in tree and isinstance(tree.get("unit"), str):
+            return {k: tree[k] for k in ("value", "unit", "source") if k in tree}
+        return {k: _core_leaves(v) for k, v in tree.items()}
+    return tree
+
+
 def _set(tree: dict, dotted: str, value: Any, source: str) -> None:
     node = tree
     for key in dotted.split("."):
@@ -292,7 +300,9 @@ def write_plant(
     text = plant_tree_yaml(tree, header)
     import yaml
 
-    params_from_tree(yaml.safe_load(text))  # the file loads strictly, or nothing is written
+    # the values load strictly, or nothing is written (checked on the leaves' value, unit and
+    # source: optional leaf keys, e.g. a range, are the base file's and kept as they are)
+    params_from_tree(_core_leaves(yaml.safe_load(text)))
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
     report = out.with_suffix(".identify.json")
