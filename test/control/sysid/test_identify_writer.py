@@ -53,7 +53,7 @@ def test_written_file_loads_and_says_where_each_value_came_from(tmp_path):
     text = out.read_text()
     got = yaml.safe_load(text)
     assert got["rotary"]["J_m"]["value"] == 5.6e-5
-    rel = f"{100 * 1.96 * 0.5e-6 / 5.6e-5:.2g}"  # 95 % half-width / value
+    rel = f"{100 * (1.96 * 0.5e-6 / 5.6e-5):.2g}"  # 95 % half-width / value
     assert got["rotary"]["J_m"]["source"] == f"identified from exc0/run.mcap (±{rel} %)"
     assert got["rotary"]["J_m"]["range"] == [1e-5, 1e-4]
     assert got["rotary"]["V_m2"]["value"] == 1e-5  # not identifiable: the base value, said so
