@@ -225,8 +225,8 @@ class _Problem:
             min(max(p.from_z(float(zi), b), p.lo), p.hi)  # rounding at a bound
             for p, zi, b in zip(self.params, z[:n_p], self.p0)
         ]
-        for i_q, i_d, ratio in self.pivot:  # Q_n from the flow at the pivot and the dead band
-            vals[i_q] = vals[i_q] * ratio(vals[i_d])
+        for i_q, factor in self.pivot:  # Q_n from the pivot flow, dead band and supply
+            vals[i_q] = vals[i_q] * factor(vals)
         offs = []
         for j in range(len(self.used)):
             zo = z[n_p + j * k : n_p + (j + 1) * k]
@@ -242,8 +242,8 @@ class _Problem:
         z = np.zeros(self.n_p + self.n_off)
         if start:
             vals = [start.get(p.name, b) for p, b in zip(self.params, self.p0)]
-            for i_q, i_d, ratio in self.pivot:
-                vals[i_q] = vals[i_q] / ratio(vals[i_d])
+            for i_q, factor in self.pivot:
+                vals[i_q] = vals[i_q] / factor(vals)
             for i, (p, b) in enumerate(zip(self.params, self.p0)):
                 z[i] = p.to_z(vals[i], b)
             k = len(self.pnames)
@@ -378,7 +378,7 @@ def _scan_dead_band(
     both ways -- a continuation along the valley) and the
     long replay's cost scores the point; the best point starts stage 2.
     """
-    ((_i_q, i_d, _r),) = short.pivot
+    i_d = [p.name for p in short.params].index(f"valve_{short.axis}.{model.DEAD_BAND}")
     w = short.params[i_d].width
     lo, hi = short.lo, short.hi
     z = short.z_start(offsets)
@@ -441,191 +441,40 @@ def _scan_dead_band(
     return best[1], best[0]
 
 
-def _pivots(axis: str, base, params, used) -> list[tuple[int, int, Callable[[float], float]]]:
-    """Decouple a valve's flow scale from its dead band.
+def _pivots(axis: str, base, params, used) -> list[tuple[int, Callable[[list[float]], float]]]:
+    """Decouple a valve's flow scale from its dead band and its supply pressure.
 
     With flow = Q_n · table(du − db), every (Q_n, db) pair that gives the same
     flow at the voltages the rig mostly ran at lies in one long curved valley
-    of the cost. So the fit moves Q_eff, the flow at the pivot du_ref (the
-    median |u − 5 V| of the records, outside the dead band), and the dead
-    band rotates the curve about it: Q_n = Q_eff · table(du_ref) / table(du_ref − db).
+    of the cost; and the choked flow of Eq. 11 goes with Q_n · p_s, a second
+    valley. So the fit moves Q_eff, the flow at the pivot du_ref (the median
+    |u − 5 V| of the records, outside the dead band) at the start's supply, and
+    Q_n = Q_eff · table(du_ref) / table(du_ref − db) · p_s0 / p_s: the dead
+    band rotates the curve about the pivot, a supply change keeps the choked
+    flow. Returns (index of Q_n, factor(values)) pairs.
     """
     names = [p.name for p in params]
     valve = "valve_" + axis
     q, d = f"{valve}.Q_n", f"{valve}.{model.DEAD_BAND}"
-    if q not in names or d not in names:
+    if q not in names:
         return []
+    supply = f"supply.p_s_{axis}"
+    i_d = names.index(d) if d in names else None
+    i_s = names.index(supply) if supply in names else None
     v = getattr(base, valve)
     du_t, fl_t = np.asarray(v.du_table), np.asarray(v.flow_table)
     du = np.concatenate([np.abs(r.u[axis] - 5.0) for r, _s in used])
     du = du[du > du_t[1] + 0.05]
     du_ref = float(np.median(du)) if len(du) else float(du_t[len(du_t) // 2])
     f_ref = float(np.interp(du_ref, du_t, fl_t))
+    p_s0 = float(getattr(base.supply, f"p_s_{axis}"))
 
-    def ratio(db: float) -> float:
-        return f_ref / max(float(np.interp(du_ref - db, du_t, fl_t)), 1e-6)
+    def factor(vals: list[float]) -> float:
+        f = 1.0
+        if i_d is not None:
+            f *= f_ref / max(float(np.interp(du_ref - vals[i_d], du_t, fl_t)), 1e-6)
+        if i_s is not None:
+            f *= p_s0 / vals[i_s]
+        return f
 
-    return [(names.index(q), names.index(d), ratio)]
-
-
-def _fit(
-    axis: str,
-    base,
-    records: list[Record],
-    options: FitOptions,
-    log: Callable[[str], None],
-    start: dict[str, float] | None,
-    scan: bool = False,
-) -> AxisFit:
-    from scipy.optimize import least_squares
-
-    params = tuple(p for p in model.AXIS_PARAMS[axis] if p.name in options.params)
-    p0 = [model.base_value(base, p) for p in params]
-    bounds = []
-    for p, b in zip(params, p0):
-        lo, hi = p.lo, p.hi
-        if p.name.endswith("." + model.DEAD_BAND):
-            table = getattr(base, p.name.split(".")[0]).du_table
-            lo, hi = max(lo, -0.95 * table[1]), min(hi, 5.0 - table[-1])
-        bounds.append((p.to_z(lo, b), p.to_z(hi, b)))
-    segs = [shooting.segments_of(r, axis, options.segment_s[axis]) for r in records]
-    used = [(r, s) for r, s in zip(records, segs) if len(s)]
-    if not used:
-        raise ValueError(f"{axis}: no usable data in the bags (axis not excited or all invalid)")
-    signals = AXIS_SIGNALS[axis]
-    pnames = _PRESSURE_OF[axis]
-    # signal spreads over all records (fixed: the residual weights)
-    scale = {}
-    for name in signals:
-        vals = np.concatenate([r.y[name][s.index] for r, s in used])
-        scale[name] = float(np.std(vals)) or 1.0
-    n_p = len(params)
-    n_off = len(pnames) * len(used)
-    dec = options.decimate
-    meas = [{n: r.y[n][s.index][::dec] for n in signals} for r, s in used]
-
-    pivot = _pivots(axis, base, params, used)
-
-    def unpack(z: np.ndarray):
-        vals = [p.from_z(float(zi), b) for p, zi, b in zip(params, z[:n_p], p0)]
-        for i_q, i_d, ratio in pivot:  # Q_n from the flow at the pivot and the dead band
-            vals[i_q] = vals[i_q] * ratio(vals[i_d])
-        offs = []
-        for j in range(len(used)):
-            zo = z[n_p + j * len(pnames) : n_p + (j + 1) * len(pnames)]
-            offs.append({name: float(v) * _OFFSET_WIDTH for name, v in zip(pnames, zo)})
-        return vals, offs
-
-    def residuals(z: np.ndarray) -> np.ndarray:
-        vals, offs = unpack(z)
-        plant = model.apply(base, params, vals)
-        parts = []
-        for (r, s), m, off in zip(used, meas, offs):
-            sim = shooting.simulate(plant, r, s, off, axis)
-            for name in signals:
-                parts.append((m[name] - sim[name][::dec]) / scale[name])
-        return np.concatenate(parts)
-
-    z0 = np.zeros(n_p + n_off)
-    for i, (p, b) in enumerate(zip(params, p0)):
-        if start and p.name in start:
-            z0[i] = p.to_z(start[p.name], b)
-    for i_q, i_d, ratio in pivot:
-        if start and params[i_q].name in start:
-            db = start.get(params[i_d].name, 0.0)
-            z0[i_q] = params[i_q].to_z(start[params[i_q].name] / ratio(db), p0[i_q])
-    for j, (rec, _s) in enumerate(used):
-        for q, name in enumerate(pnames):
-            key = f"offset:{rec.path}:{name}"
-            if start and key in start:
-                z0[n_p + j * len(pnames) + q] = start[key] / _OFFSET_WIDTH
-    lo = np.array([b[0] for b in bounds] + [-_OFFSET_BOUND / _OFFSET_WIDTH] * n_off)
-    hi = np.array([b[1] for b in bounds] + [_OFFSET_BOUND / _OFFSET_WIDTH] * n_off)
-    t0 = time.perf_counter()
-    z0 = np.clip(z0, lo, hi)
-    r0 = residuals(z0)
-    cost0 = 0.5 * float(r0 @ r0)
-    n_eval = [0]
-
-    def tracked(z):
-        n_eval[0] += 1
-        r = residuals(z)
-        c = 0.5 * float(r @ r)
-        if n_eval[0] % (len(z) + 1) == 1:
-            vals, _ = unpack(z)
-            shown = ", ".join(f"{p.name.split('.')[-1]}={v:.4g}" for p, v in zip(params, vals))
-            log(
-                f"  {axis} eval {n_eval[0]:4d}  cost {c:.5g}  ({time.perf_counter() - t0:.0f} s)  {shown}"
-            )
-        return r
-
-    if scan and pivot:
-        z0 = _scan_dead_band(residuals, z0, pivot[0][:2], lo, hi, params, log)
-    res = least_squares(
-        tracked,
-        z0,
-        bounds=(lo, hi),
-        method="trf",
-        x_scale=1.0,
-        diff_step=options.diff_step,
-        max_nfev=options.max_nfev,
-        xtol=options.xtol,
-        ftol=options.ftol,
-    )
-    wall = time.perf_counter() - t0
-    J = res.jac
-    r = res.fun
-    m_res, p_all = J.shape
-    s2 = float(r @ r) / max(m_res - p_all, 1)
-    # residual autocorrelation (per record and signal, along time)
-    taus = []
-    k = 0
-    for m in meas:
-        for name in signals:
-            n = m[name].size
-            taus.append(_autocorr_time(r[k : k + n]))
-            k += n
-    infl = float(np.median(taus)) if taus else 1.0
-    JtJ = J.T @ J
-    cov_z = np.linalg.pinv(JtJ) * s2 * infl
-    sd_z = np.sqrt(np.maximum(np.diag(cov_z), 0.0))
-    vals, offs = unpack(res.x)
-    # the parameters' covariance through the (pivoted) map z -> p, to first order
-    G = np.zeros((n_p, n_p))
-    for i in range(n_p):
-        dz = np.zeros_like(res.x)
-        dz[i] = 1e-6
-        up, _ = unpack(res.x + dz)
-        dn, _ = unpack(res.x - dz)
-        G[:, i] = (np.array(up) - np.array(dn)) / 2e-6
-    cov_p = G @ cov_z[:n_p, :n_p] @ G.T
-    sigma = [float(v) for v in np.sqrt(np.maximum(np.diag(cov_p), 0.0))]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = np.nan_to_num(cov_p / np.outer(sigma, sigma))
-    offsets, offsets_sigma = {}, {}
-    for j, ((rec, _s), off) in enumerate(zip(used, offs)):
-        offsets[rec.path] = off
-        offsets_sigma[rec.path] = {
-            name: float(sd_z[n_p + j * len(pnames) + q] * _OFFSET_WIDTH)
-            for q, name in enumerate(pnames)
-        }
-    plant = model.apply(base, params, vals)
-    return AxisFit(
-        axis=axis,
-        names=[p.name for p in params],
-        units=[p.unit for p in params],
-        base=p0,
-        value=vals,
-        sigma=sigma,
-        corr=corr[:n_p, :n_p],
-        offsets=offsets,
-        offsets_sigma=offsets_sigma,
-        cost_start=cost0,
-        cost=float(res.cost),
-        nfev=int(res.nfev),
-        wall_s=wall,
-        inflation=infl,
-        n_residuals=m_res,
-        status=str(res.message),
-        plant=plant,
-    )
+    return [(names.index(q), factor)]
