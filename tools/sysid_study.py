@@ -30,6 +30,11 @@ def main() -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     parts = [f"# Identification study ({args.level} excitation)\n"]
+    summary = [
+        "| plant | perturbed parameters: truth -> identified | other identified values within tolerance | "
+        "held-out fit % (x, p_c1, p_c2, p_m1, ω) | excite + identify (s) |",
+        "|---|---|---|---|---|",
+    ]
     t_all = time.perf_counter()
     for name in args.only or list(PERTURBATIONS):
         slug = re.sub(r"[^a-z0-9]+", "_", name.lower()).strip("_")
@@ -44,6 +49,25 @@ def main() -> int:
         parts.append(res.markdown())
         (out / "study.md").write_text("\n".join(parts))
         bad = res.failures()
+        keys = set(PERTURBATIONS[name])
+        hit = [
+            r for r in res.rows if r.name in keys or r.name.replace("dead_band", "du_table") in keys
+        ]
+        cells = "; ".join(
+            f"{r.name} {r.truth:.4g} -> {r.value:.4g} ({100 * r.error:+.1f} %)"
+            if r.tol[0] == "rel"
+            else f"{r.name} {r.truth:+.3g} -> {r.value:+.3g}"
+            for r in hit
+        )
+        others = [r for r in res.rows if r not in hit and r.taken]
+        ok = sum(r.ok for r in others)
+        held = next(v for v in res.validations if v.held_out)
+        fits = ", ".join(
+            f"{held.fits.get(k, float('nan')):.1f}" for k in ("x", "p_c1", "p_c2", "p_m1", "omega")
+        )
+        t = res.times_s.get("excite (2 bags)", 0) / 2 + res.times_s.get("identify", 0)
+        summary.append(f"| {name} | {cells} | {ok} / {len(others)} | {fits} | {t:.0f} |")
+        (out / "summary.md").write_text("\n".join(summary) + "\n")
         print(
             f"   {len(bad)} parameter(s) outside tolerance; {res.times_s}",
             file=sys.stderr,
