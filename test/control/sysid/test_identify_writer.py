@@ -48,14 +48,16 @@ def _ident(base):
 def test_written_file_loads_and_says_where_each_value_came_from(tmp_path):
     base = load_plant()
     tree = yaml.safe_load(config_file("plant.yaml").read_text())
-    tree["rotary"]["J_m"]["range"] = [1e-5, 1e-4]  # an optional leaf key of another tool: kept
+    tree["rotary"]["J_m"]["range"] = [1e-5, 1e-4]  # an uncertainty of the base: measured now
+    tree["rotary"]["M_c"]["range"] = [0.1, 0.2]  # not identified here: kept as it is
     out = write_plant(_ident(base), tree, tmp_path / "p.yaml")
     text = out.read_text()
     got = yaml.safe_load(text)
     assert got["rotary"]["J_m"]["value"] == 5.6e-5
     rel = f"{100 * (1.96 * 0.5e-6 / 5.6e-5):.2g}"  # 95 % half-width / value
     assert got["rotary"]["J_m"]["source"] == f"identified from exc0/run.mcap (±{rel} %)"
-    assert got["rotary"]["J_m"]["range"] == [1e-5, 1e-4]
+    assert got["rotary"]["J_m"]["range"] == pytest.approx([5.6e-5 - 0.98e-6, 5.6e-5 + 0.98e-6])
+    assert got["rotary"]["M_c"]["range"] == [0.1, 0.2]
     assert got["rotary"]["V_m2"]["value"] == 1e-5  # not identifiable: the base value, said so
     assert got["rotary"]["V_m2"]["source"].startswith("not identifiable from exc0/run.mcap")
     assert got["valve_rotary"]["du_table"]["value"][1] == pytest.approx(0.36 + 0.12)
@@ -64,7 +66,7 @@ def test_written_file_loads_and_says_where_each_value_came_from(tmp_path):
         "identified from the quiet segments"
     )
     assert got["linear"]["A_c1"] == tree["linear"]["A_c1"]  # Table 1 untouched
-    del got["rotary"]["J_m"]["range"]
+    del got["rotary"]["J_m"]["range"], got["rotary"]["M_c"]["range"]
     from pneu_sim.physics.plant_file import params_from_tree
 
     p = params_from_tree(got)

@@ -229,12 +229,18 @@ def _core_leaves(tree: Any) -> Any:
     return tree
 
 
-def _set(tree: dict, dotted: str, value: Any, source: str) -> None:
+def _set(tree: dict, dotted: str, value: Any, source: str, ci95: float | None = None) -> None:
+    """Set a leaf's value and source. An uncertainty the base gave it (an optional ``range``
+    or ``alternatives`` key, as ``pneu sweep`` reads them) is what identification just
+    measured: a range becomes the 95 % interval, alternatives are resolved (dropped)."""
     node = tree
     for key in dotted.split("."):
         node = node[key]
     node["value"] = value
     node["source"] = source
+    if "range" in node and ci95 is not None and isinstance(value, float):
+        node["range"] = [value - ci95, value + ci95]
+    node.pop("alternatives", None)
 
 
 def write_plant(
@@ -281,6 +287,7 @@ def write_plant(
                 name,
                 float(values[name]),
                 f"identified from {names} (±{100 * fit.rel_ci95(i):.2g} %)",
+                fit.ci95(i),
             )
     for key, leaf in (("x", "sensors.laser.sigma_m"), ("p", "sensors.pressure.sigma_v")):
         nz = [v for k, v in ident.noise.items() if (k == "x") == (key == "x")]
