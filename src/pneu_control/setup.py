@@ -32,6 +32,7 @@ setup(
         "distributed>=2024.8",  # pneu sweep --executor dask
         "PyYAML>=6.0",
         "matplotlib>=3.7",
+        "scipy>=1.11",  # pneu identify: least_squares
         "mcap-ros2-support>=0.5",  # pneu_control.experiment.fault_table checks bags with it
         "tqdm>=4.66",  # progress bars (cli/progress.py)
     ],
@@ -52,6 +53,7 @@ setup(
             "logger = pneu_control.nodes.logger_node:main",
             "controller_manager = pneu_control.nodes.controller_manager:main",
             "bench_ros = pneu_control.bench.ros_graph:main",
+            "exciter = pneu_control.nodes.exciter_node:main",
         ],
     },
 )

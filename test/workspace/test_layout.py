@@ -200,6 +200,7 @@ ROLES = {
         "fastloop",
         "analysis",
         "sweep",
+        "sysid",
         "nodes",
         "cli",
         "bench",
@@ -243,7 +244,7 @@ def test_nidaqmx_only_in_the_daq_backend(pkg):
 def test_argparse_only_in_cli_and_benchmarks_only_in_bench(pkg):
     """Command-line parsing lives in cli/; timing loops (perf_counter) in bench/ (and the
     runner's own wall-time figure, the driver loop's clock and the node shells)."""
-    clock_ok = {"bench", "cli", "nodes", "loop", "experiment"}
+    clock_ok = {"bench", "cli", "nodes", "loop", "experiment", "sysid"}  # sysid: fit progress
     bad = []
     for f in sorted((SRC / pkg / pkg).rglob("*.py")):
         role = _role(pkg, f)
@@ -402,6 +403,25 @@ def _declared_params(pkg: str, module: str) -> set[str]:
     return out
 
 
+def _declared_param_types(pkg: str, module: str) -> dict[str, type]:
+    """``declare_parameter(name, <constant default>)`` -> {name: type of the default}."""
+    tree = ast.parse((SRC / pkg / pkg / "nodes" / f"{module}.py").read_text(encoding="utf-8"))
+    out: dict[str, type] = {}
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "declare_parameter"
+            and node.args
+            and isinstance(node.args[0], ast.Constant)
+        ):
+            default = node.args[1] if len(node.args) > 1 else None
+            out[node.args[0].value] = (
+                type(default.value) if isinstance(default, ast.Constant) else str
+            )
+    return out
+
+
 def _node_param_types(package: str, executable: str) -> dict[str, type]:
     """Every parameter a node declares, with its type (dataclass-declared ones included)."""
     from pneu_control.controller.params import AxisControllerParams
@@ -417,6 +437,8 @@ def _node_param_types(package: str, executable: str) -> dict[str, type]:
         return base | own | {s.name: s.type for s in describe(AxisControllerParams)}
     if (package, executable) == ("pneu_control", "controller_manager"):
         return base | dict.fromkeys(_declared_params(package, executable), str)
+    if (package, executable) == ("pneu_control", "exciter"):
+        return base | _declared_param_types(package, "exciter_node")
     module = {"logger": "logger_node", "driver_node": "driver_node"}[executable]
     return base | dict.fromkeys(_declared_params(package, module), str)
 
@@ -443,16 +465,25 @@ def _flatten(d: dict, prefix: str = "") -> dict:
     return out
 
 
-LAUNCH_CASES = [
+_OVERRIDES = {
+    "excite.launch.py": [{}, {"target": "rig", "axes": "linear", "level": "quick"}],
+}
+_DEFAULT_OVERRIDES = [
     {},
     {"controller": "pid", "axes": "linear", "reference": "sine:amplitude=20,frequency_hz=0.25"},
     {"recorder": "rosbag2", "executor": "single", "state_rate_hz": "50"},
     {"deployment": "hosted", "mode": "realtime", "axes": "both"},
 ]
+LAUNCH_CASES = [
+    (path, ov) for path in LAUNCH_FILES for ov in _OVERRIDES.get(path.name, _DEFAULT_OVERRIDES)
+]
 
 
-@pytest.mark.parametrize("path", LAUNCH_FILES, ids=lambda p: f"{p.parent.parent.name}/{p.name}")
-@pytest.mark.parametrize("overrides", LAUNCH_CASES)
+@pytest.mark.parametrize(
+    ("path", "overrides"),
+    LAUNCH_CASES,
+    ids=[f"{p.parent.parent.name}/{p.name}:{i}" for i, (p, _) in enumerate(LAUNCH_CASES)],
+)
 def test_launch_files_start_existing_executables_with_valid_parameters(path, overrides, tmp_path):
     args_of = {p: _launch_args(p) for p in LAUNCH_FILES}
     overrides = {k: v for k, v in overrides.items() if k in args_of[path]}  # rig: no mode
@@ -464,8 +495,10 @@ def test_launch_files_start_existing_executables_with_valid_parameters(path, ove
     names = [n.kwargs.get("name") for n in nodes if "name" in n.kwargs]
     assert len(names) == len(set(names))
     assert "logger" in names
+    # what answers the samples: the controllers (their own processes, or hosted), or the
+    # excitation experiment
     hosted = overrides.get("deployment") == "hosted"
-    assert hosted or any(n.endswith("_controller") for n in names)
+    assert hosted or any(n.endswith("_controller") or n == "pneu_exciter" for n in names)
     for n in nodes:
         pkg, exe = n.kwargs["package"], n.kwargs["executable"]
         assert exe in scripts.get(pkg, {}), f"{path.name}: {pkg} has no executable {exe}"

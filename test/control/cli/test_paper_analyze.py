@@ -19,7 +19,7 @@ def paper_dir(tmp_path_factory):
 def test_paper_table_fields(paper_dir):
     doc = json.loads((paper_dir / "paper_table.json").read_text())
     rows = doc["experiments"]
-    assert {r["gains"] for r in rows} == {"paper", "retuned", "design"}
+    assert {r["gains"] for r in rows} == {"paper", "paper_abs", "retuned", "design"}
     assert {r["controller"] for r in rows} == {"eso_smc", "eso_smc_plus"}
     for r in rows:
         assert r["seeds"] == 2 and r["e_max_worst"] >= r["e_max_mean"]

@@ -14,7 +14,6 @@ from dataclasses import replace
 import pytest
 import yaml
 from pneu_control.cli import paper as paper_cli
-from pneu_control.cli import tune as tune_cli
 from pneu_control.cli.main import main
 from pneu_control.cli.progress import counted, progress_bar
 from pneu_control.experiment import tuning
@@ -67,7 +66,7 @@ def test_pneu_tune_counts_every_grid_point(tmp_path, monkeypatch, capsys):
     def make_score(axis, plant, controllers_file):
         return lambda overrides: calls.append((axis, overrides["algorithm"])) or 1.0
 
-    monkeypatch.setattr(tune_cli, "make_score", make_score)
+    monkeypatch.setattr(tuning, "make_score", make_score)
     err = Tty()
     monkeypatch.setattr("sys.stderr", err)
     out = tmp_path / "retuned.yaml"
@@ -82,7 +81,7 @@ def test_pneu_tune_counts_every_grid_point(tmp_path, monkeypatch, capsys):
 @pytest.mark.parametrize("command", ["paper", "tune"])
 def test_commands_print_no_bar_into_a_pipe(command, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(tuning, "identify_b0", lambda axis, plant: 1000.0)
-    monkeypatch.setattr(tune_cli, "make_score", lambda *a: lambda o: 1.0)
+    monkeypatch.setattr(tuning, "make_score", lambda *a: lambda o: 1.0)
     short = replace(experiment_by_id("smooth_step_eq38"), duration_s=0.2)
     monkeypatch.setattr(paper_cli, "experiment_by_id", lambda _id: short)
     argv = {

@@ -96,7 +96,7 @@ def test_step_matches_the_core_called_directly_and_answers_in_rosbags_bytes(axis
             np.array(ref.state_values()),
             equal_nan=True,
         )
-    assert core.n_samples == 200 and core.sensors.fallbacks == 0
+    assert core.n_samples == 200 and core.decoder.sensors.fallbacks == 0
 
 
 def test_state_is_decimated_by_the_sample_clock_and_commands_never_are():

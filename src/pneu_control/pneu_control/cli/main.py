@@ -29,6 +29,9 @@ SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("compare", "pneu_control.cli.compare"),
     ("replay", "pneu_control.cli.replay"),
     ("tune", "pneu_control.cli.tune"),
+    ("excite", "pneu_control.cli.excite"),
+    ("identify", "pneu_control.cli.identify"),
+    ("validate", "pneu_control.cli.validate"),
     ("bench", "pneu_control.cli.bench"),
 )
 

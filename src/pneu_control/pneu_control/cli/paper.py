@@ -85,6 +85,11 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = Path(args.config_dir) if args.config_dir else config_dir()
 
+    plant_abs = paper.absolute_supply_plant(plant)
+
+    def plant_for(gains: str):
+        return plant_abs if gains == paper.ABSOLUTE_SUPPLY_SET else plant
+
     def runner(exp: Experiment, controller: str, gains: str, run_dir: Path):
         spec = session.build_spec(
             axes=(exp.axis,),
@@ -93,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
             duration_s=exp.duration_s,
             seed=args.seed,
             controllers_file=cfg / paper.GAIN_SETS[gains],
-            plant=plant,
+            plant=plant_for(gains),
             name=f"{exp.id}/{controller}/{gains}",
         )
         spec = _with_window(spec, exp)
@@ -112,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
             duration_s=exp.duration_s,
             seed=seed,
             controllers_file=cfg / paper.GAIN_SETS[gains],
-            plant=plant,
+            plant=plant_for(gains),
         )
         return run_spec(_with_window(spec, exp)).metrics[exp.axis]
 
@@ -148,7 +153,9 @@ def run(args: argparse.Namespace) -> int:
                 keys = [
                     (exp.id, c, g)
                     for c, g in paper.runs_for(exp)
-                    if (g == gains) or (gains == "retuned" and g == "design")
+                    if (g == gains)
+                    or (gains == "retuned" and g == "design")
+                    or (gains == "paper" and g == paper.ABSOLUTE_SUPPLY_SET)
                 ]
                 series = [
                     _series(results[k][0], exp, f"{k[1]} ({k[2]} gains)", results[k][1])

@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -15,9 +13,7 @@ from pneu_msgs_py.params.core import to_dict
 
 from pneu_control.cli.progress import counted, progress_bar
 from pneu_control.controller.params import load_controller_params
-from pneu_control.experiment import session, tuning
-from pneu_control.experiment.robustness import ROBUSTNESS_VARIANTS, scaled_plant
-from pneu_control.experiment.runner import run as run_spec
+from pneu_control.experiment import tuning
 
 NAME = "tune"
 HELP = "re-identify b0 from the twin's step response and re-tune PID, LADRC, ESO-SMC, ESO-SMC+ (grid search)"
@@ -32,35 +28,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--controllers", default=None, metavar="FILE", help="the paper's gains (base)")
     p.add_argument("--axis", choices=("linear", "rotary", "both"), default="both")
     p.add_argument("--algorithm", action="append", choices=ALGORITHMS, default=[])
-
-
-def make_score(axis: str, plant, controllers_file) -> Any:
-    """Tuning cost: the worst RMSE over the axis's tuning experiments, on the nominal twin
-    and the ±30 % mass/supply corners (robustness is part of the method)."""
-    plants = [plant] + [scaled_plant(plant, mass=m, supply=s) for m, s in ROBUSTNESS_VARIANTS]
-    cases = []
-    for exp in tuning.TUNING_EXPERIMENTS[axis]:
-        base = session.build_spec(
-            axes=(axis,),
-            reference=dict(exp.reference),
-            duration_s=exp.duration_s,
-            controllers_file=controllers_file,
-            plant=plant,
-            name="tune",
-        )
-        cases.extend((exp, replace(base, plant=p)) for p in plants)
-
-    def score(overrides: dict[str, Any]) -> float:
-        worst = 0.0
-        for exp, spec in cases:
-            params = load_controller_params(axis, controllers_file, {**exp.reference, **overrides})
-            m = run_spec(replace(spec, controllers={axis: params})).metrics.get(axis)
-            if m is None or not math.isfinite(m.rmse):
-                return math.inf
-            worst = max(worst, m.rmse)
-        return worst
-
-    return score
 
 
 def retuned_document(
@@ -100,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         unit = "mm/s^2/V" if axis == "linear" else "rpm/s^2/V"
         bar.write(f"{axis}: identified b0 = {b0:.6g} {unit}", file=sys.stderr)
         notes.append(f"{axis}: identified b0 = {b0:.6g} {unit}")
-        score = counted(make_score(axis, plant, args.controllers), bar)
+        score = counted(tuning.make_score(axis, plant, args.controllers), bar)
         merged: dict[str, Any] = {}
         for alg in algorithms:
             best, cost, n = tuning.tune_axis(axis, alg, b0, score, paper)

@@ -12,6 +12,7 @@ from pneu_msgs_py.bag import BagWriter
 from pneu_control.controller.axis import STATE_FIELDS
 
 __all__ = [
+    "EXCITE_METADATA",
     "FAULTS_METADATA",
     "INTERVALS_METADATA",
     "RUN_METADATA",
@@ -24,6 +25,7 @@ RUN_METADATA = "pneu.run"  # metadata record holding the run's full config
 SAFETY_METADATA = "pneu.safety"  # supervisor on/off, its thresholds, allow_unsafe
 FAULTS_METADATA = "pneu.faults"  # the injected faults (written at the start)
 INTERVALS_METADATA = "pneu.fault_intervals"  # injected + safe intervals (written at the end)
+EXCITE_METADATA = "pneu.excite"  # excitation design per axis (pneu_control.sysid)
 
 
 def safety_metadata(echo: dict[str, Any]) -> dict[str, str]:
@@ -56,9 +58,25 @@ def intervals_metadata(intervals: list[Any], counters: dict[str, int]) -> dict[s
     }
 
 
+def excite_metadata(echo: dict[str, Any]) -> dict[str, dict[str, str]]:
+    """``pneu.excite`` when the run is an excitation experiment: each axis's design (JSON) and seed."""
+    designs = {a: c for a, c in echo.get("controllers", {}).items() if "segments" in c}
+    if not designs:
+        return {}
+    return {
+        EXCITE_METADATA: {
+            "designs_json": json.dumps(designs, sort_keys=True),
+            "seed": str(echo.get("seed", "")),
+            "axes": ",".join(designs),
+            "duration_s": str(echo.get("duration_s", "")),
+        }
+    }
+
+
 def run_metadata(echo: dict[str, Any]) -> dict[str, dict[str, str]]:
     """MCAP metadata records (string maps) describing a run; see pneu_control.analysis.run_analysis."""
     return {
+        **excite_metadata(echo),
         RUN_METADATA: {
             "config_json": json.dumps(echo, sort_keys=True),
             "seed": str(echo.get("seed", "")),

@@ -48,7 +48,7 @@ class RunSpec:
     """Everything that sets a run: with the same spec the results are byte-identical."""
 
     axes: tuple[str, ...]
-    controllers: dict[str, Any]  # axis -> AxisControllerParams
+    controllers: dict[str, Any]  # axis -> AxisControllerParams (or an ExcitationDesign)
     plant: Any  # PlantParams
     duration_s: float
     seed: int = 0
@@ -171,7 +171,7 @@ def run(
     plant = Plant(spec.plant, seed=spec.seed)
     period = plant.T
     n = int(round(spec.duration_s / period))
-    ctrls = {axis: AxisController(axis, spec.controllers[axis]) for axis in spec.axes}
+    ctrls = {axis: _controller(axis, spec.controllers[axis], period) for axis in spec.axes}
     rec_samples: list[SensorSample] = []
     rec_state: dict[str, list[tuple[float, ...]]] = {axis: [] for axis in ctrls}
     rec_u: dict[str, list[float]] = {axis: [] for axis in ctrls}
@@ -179,6 +179,7 @@ def run(
     active = [(axis, ctrls[axis], rec_state[axis], rec_u[axis]) for axis in AXES if axis in ctrls]
     rec_out: list[tuple[float, float]] = []  # what the DAQ held during each step
     rec_truth: list[tuple[float, float]] = []  # (x, omega) true, only with faults
+    algorithms = {axis: c.algorithm for axis, c in ctrls.items()}
     nan_state = (math.nan,) * len(STATE_FIELDS)
 
     sup = None
@@ -284,6 +285,7 @@ def run(
         wall,
         interrupted=interrupted,
         truth=truth,
+        algorithms=algorithms,
     )
 
 
@@ -300,6 +302,7 @@ def result_of(
     *,
     interrupted: bool = False,
     truth: dict[str, np.ndarray] | None = None,
+    algorithms: dict[str, str] | None = None,
 ) -> RunResult:
     """The :class:`RunResult` of recorded arrays (``held``: (N, 2) V, linear and rotary):
     fault and safe intervals, then the DESIGN §7 metrics per axis (shared by the runner
@@ -319,7 +322,7 @@ def result_of(
         t,
         samples,
         axes,
-        {axis: spec.controllers[axis].algorithm for axis in axes},
+        algorithms or {axis: spec.controllers[axis].algorithm for axis in axes},
         metrics,
         wall_s,
         interrupted,
@@ -329,6 +332,14 @@ def result_of(
         fault_intervals=faults,
         safety_counters=counters,
     )
+
+
+def _controller(axis: str, params: Any, period_s: float) -> Any:
+    """The per-sample core of ``axis``: an AxisController, or what ``params`` makes itself
+    (``params.make_controller(axis, period_s)``: e.g. an excitation design's exciter, which
+    answers samples like a controller: ``update``, ``state_values``, ``algorithm``)."""
+    make = getattr(params, "make_controller", None)
+    return make(axis, period_s) if make is not None else AxisController(axis, params)
 
 
 def fault_intervals_of(spec: RunSpec, events: list[Any], period_s: float) -> list[Any]:

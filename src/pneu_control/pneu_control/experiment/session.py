@@ -148,7 +148,10 @@ def config_echo(spec: RunSpec) -> dict[str, Any]:
         "duration_s": spec.duration_s,
         "seed": spec.seed,
         "x0": spec.x0,
-        "controllers": {axis: to_dict(p) for axis, p in spec.controllers.items()},
+        "controllers": {
+            axis: p.to_dict() if hasattr(p, "to_dict") else to_dict(p)
+            for axis, p in spec.controllers.items()
+        },
         "windows": {axis: w.to_dict() for axis, w in spec.windows.items()},
         "plant": to_dict(spec.plant),
         "faults": [f.to_dict() for f in spec.faults],
@@ -196,15 +199,17 @@ def execute(
     progress: bool = False,
     bag_name: str = "run.mcap",
     live: Any | None = None,
+    echo_overrides: dict[str, Any] | None = None,
 ) -> RunResult:
     """Run ``spec``, write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP.
 
     ``live``: a :class:`pneu_msgs_py.live.server.LiveServer` that gets every cycle
-    too (after the bag); the caller closes it.
+    too (after the bag); the caller closes it. ``echo_overrides`` replace entries of
+    the recorded config (e.g. a blind identification study hides the twin's parameters).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    echo = config_echo(spec)
+    echo = {**config_echo(spec), **(echo_overrides or {})}
     report = _progress_printer(spec.duration_s, spec.name) if progress else None
     with sigterm_as_interrupt():
         if bag:

@@ -47,6 +47,7 @@ from pneu_msgs_py.contract.units import MM_PER_M, RPM_PER_RAD_S
 
 __all__ = [
     "TUNING_EXPERIMENTS",
+    "make_score",
     "TuningExperiment",
     "grid_for",
     "identify_b0",
@@ -151,14 +152,24 @@ def identify_b0(axis: str, plant_params, *, seeds: tuple[int, ...] = (0, 1, 2)) 
     return float(np.mean(estimates))
 
 
+# PID grid per axis: decades of kp about the paper's, decades of ki/kp about the paper's ratio.
+# Rotary: widened (8 x 6 points still) until the optimum is inside -- on the first span
+# (-3..0.5, -1.5..1) it sat on the low-kp, high-ki/kp corner.
+PID_SPAN = {
+    "linear": ((-3.0, 0.5), (-1.5, 1.0)),
+    "rotary": ((-5.0, -1.5), (-0.5, 2.5)),
+}
+
+
 def grid_for(algorithm: str, axis: str, paper: Any) -> list[dict[str, float]]:
     """The fixed search grid (dotted overrides) of one algorithm; 48 points each."""
     points: list[dict[str, float]] = []
     if algorithm == "pid":
         kd_over_kp = paper.pid.kd / paper.pid.kp
         ti_ratio = paper.pid.ki / paper.pid.kp
-        for kp in paper.pid.kp * np.logspace(-3.0, 0.5, 8):
-            for r in ti_ratio * np.logspace(-1.5, 1.0, 6):
+        (k0, k1), (r0, r1) = PID_SPAN[axis]
+        for kp in paper.pid.kp * np.logspace(k0, k1, 8):
+            for r in ti_ratio * np.logspace(r0, r1, 6):
                 points.append(
                     {"pid.kp": float(kp), "pid.ki": float(kp * r), "pid.kd": float(kp * kd_over_kp)}
                 )
@@ -205,17 +216,60 @@ def fixed_overrides(algorithm: str, b0: float, paper: Any, T: float) -> dict[str
     return {}
 
 
+def make_score(
+    axis: str, plant, controllers_file=None, *, corners: bool = True
+) -> Callable[[dict[str, Any]], float]:
+    """Tuning cost: the worst RMSE over the axis's tuning experiments, on the twin ``plant``
+    and (``corners``) the ±30 % mass/supply corners (robustness is part of the method)."""
+    from dataclasses import replace
+
+    from pneu_control.controller.params import load_controller_params
+    from pneu_control.experiment import session
+    from pneu_control.experiment.robustness import ROBUSTNESS_VARIANTS, scaled_plant
+    from pneu_control.experiment.runner import run as run_spec
+
+    plants = [plant]
+    if corners:
+        plants += [scaled_plant(plant, mass=m, supply=s) for m, s in ROBUSTNESS_VARIANTS]
+    cases = []
+    for exp in TUNING_EXPERIMENTS[axis]:
+        base = session.build_spec(
+            axes=(axis,),
+            reference=dict(exp.reference),
+            duration_s=exp.duration_s,
+            controllers_file=controllers_file,
+            plant=plant,
+            name="tune",
+        )
+        cases.extend((exp, replace(base, plant=p)) for p in plants)
+
+    def score(overrides: dict[str, Any]) -> float:
+        worst = 0.0
+        for exp, spec in cases:
+            params = load_controller_params(axis, controllers_file, {**exp.reference, **overrides})
+            m = run_spec(replace(spec, controllers={axis: params})).metrics.get(axis)
+            if m is None or not math.isfinite(m.rmse):
+                return math.inf
+            worst = max(worst, m.rmse)
+        return worst
+
+    return score
+
+
 def tune_axis(
     axis: str,
     algorithm: str,
     b0: float,
     score: Callable[[dict[str, Any]], float],
     paper: Any,
+    stride: int = 1,
 ) -> tuple[dict[str, float], float, int]:
-    """Grid search; returns (best overrides, best score, number of runs)."""
+    """Grid search; returns (best overrides, best score, number of runs).
+
+    ``stride``: every stride-th grid point only (a coarse, faster search; 1 = the method)."""
     fixed = fixed_overrides(algorithm, b0, paper, paper.sample_time_s)
     best, best_cost = None, math.inf
-    grid = grid_for(algorithm, axis, paper)
+    grid = grid_for(algorithm, axis, paper)[::stride]
     for point in grid:
         overrides = {**fixed, **point}
         cost = score({"algorithm": algorithm, **overrides})

@@ -33,7 +33,7 @@ from pneu_msgs_py.contract.wire import CommandWire, SensorWire, StateWire
 
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
 
-__all__ = ["INPUT_TOPICS", "SampleAssembler", "ControllerShellCore"]
+__all__ = ["INPUT_TOPICS", "SampleAssembler", "TickDecoder", "ControllerShellCore"]
 
 _P = tuple(PRESSURE_TOPICS)
 #: The sensor topics each axis' controller takes (its algorithms read nothing else).
@@ -84,6 +84,45 @@ class SampleAssembler:
         return stamp_ns, done
 
 
+class TickDecoder:
+    """Raw sensor payloads of ``topics`` in, the :class:`SensorSample` of each complete
+    tick out (fields of topics not taken are NaN; samples indexed from 0)."""
+
+    __slots__ = ("assembler", "n_bad", "n_ticks", "sensors", "topics")
+
+    def __init__(self, topics: tuple[str, ...]) -> None:
+        self.topics = topics
+        self.assembler = SampleAssembler(topics)
+        self.sensors = SensorWire()
+        self.n_bad = 0  # malformed payloads
+        self.n_ticks = 0
+
+    def on_raw(self, topic: str, data: bytes) -> SensorSample | None:
+        try:
+            stamp, fields = self.sensors.decode(topic, data)
+        except ValueError:
+            self.n_bad += 1
+            return None
+        tick = self.assembler.add(topic, stamp, fields)
+        if tick is None:
+            return None
+        stamp, f = tick
+        g = f.get
+        counts = g("counts", 0.0)
+        self.n_ticks += 1
+        return SensorSample(
+            self.n_ticks - 1,
+            stamp,
+            g("p_c1", _NAN),
+            g("p_c2", _NAN),
+            g("p_m1", _NAN),
+            g("x", _NAN),
+            g("theta", _NAN),
+            g("omega", _NAN),
+            int(counts) if counts == counts else 0,
+        )
+
+
 class ControllerShellCore:
     """Everything a controller node does per sample (see the module docstring)."""
 
@@ -93,15 +132,14 @@ class ControllerShellCore:
         self.axis = axis
         self.controller = AxisController(axis, params)
         self.topics = INPUT_TOPICS[axis]
-        self.assembler = SampleAssembler(self.topics)
-        self.sensors = SensorWire()
+        self.decoder = TickDecoder(self.topics)
+        self.assembler = self.decoder.assembler
         self.commands = CommandWire(axis)
         self.states = StateWire(STATE_FIELDS)
         self.state_every = int(state_every)
         self._period_ns = round(params.sample_time_s * 1e9)
         self.n_samples = 0
         self.n_saturated = 0
-        self.n_bad = 0
         self.last_stamp_ns = -1
         self.last_u = _NAN
         self.param_changes = 0
@@ -116,30 +154,14 @@ class ControllerShellCore:
         self.param_changes += 1
 
     # -- per sample -------------------------------------------------------
+    @property
+    def n_bad(self) -> int:
+        """Malformed payloads so far."""
+        return self.decoder.n_bad
+
     def on_raw(self, topic: str, data: bytes) -> SensorSample | None:
         """One sensor payload in; the rebuilt sample when its tick is complete."""
-        try:
-            stamp, fields = self.sensors.decode(topic, data)
-        except ValueError:
-            self.n_bad += 1
-            return None
-        tick = self.assembler.add(topic, stamp, fields)
-        if tick is None:
-            return None
-        stamp, f = tick
-        g = f.get
-        counts = g("counts", 0.0)
-        return SensorSample(
-            self.n_samples,
-            stamp,
-            g("p_c1", _NAN),
-            g("p_c2", _NAN),
-            g("p_m1", _NAN),
-            g("x", _NAN),
-            g("theta", _NAN),
-            g("omega", _NAN),
-            int(counts) if counts == counts else 0,
-        )
+        return self.decoder.on_raw(topic, data)
 
     def update(self, sample: SensorSample) -> float:
         """``AxisController.update``; returns the valve command (V)."""

@@ -41,7 +41,9 @@ def default_pairs(exp: Experiment) -> tuple[tuple[str, str], ...]:
     """(controller, gain set) pairs: ``pneu paper``'s for its experiments; for any other,
     PID, LADRC and ESO-SMC with the paper's and the re-tuned gains, and ESO-SMC+ (design)."""
     if any(e.id == exp.id for e in PAPER_EXPERIMENTS):
-        return tuple(paper.runs_for(exp))
+        # not the nominal twin's supply-read-as-absolute rows: the plant samples draw the
+        # reading (gauge or absolute) themselves
+        return tuple(p for p in paper.runs_for(exp) if p[1] != paper.ABSOLUTE_SUPPLY_SET)
     pairs = [(c, g) for g in paper.PAPER_GAIN_SETS for c in exp.controllers]
     return (*pairs, ("eso_smc_plus", "design"))
 
@@ -82,7 +84,8 @@ def _files(config_dir: Path | None) -> dict[str, Path]:
     from pneu_msgs_py.params.paths import config_dir as default_dir
 
     cfg = Path(config_dir) if config_dir is not None else default_dir()
-    return {g: cfg / f for g, f in paper.GAIN_SETS.items()}
+    # the supply reading is one of the sampled factors: no gain set fixes it
+    return {g: cfg / f for g, f in paper.GAIN_SETS.items() if g != paper.ABSOLUTE_SUPPLY_SET}
 
 
 @dataclass

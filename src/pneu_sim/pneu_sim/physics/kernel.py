@@ -321,18 +321,14 @@ def implicit_pressure(p, c, mdot, dmdot_dp, h):
 
 
 @njit(**_JIT, inline="always")
-def substep(st, prm, u_l, u_r, h, K):
-    """Advance both axes and the sensor lags by h seconds (inputs u_l, u_r held).
-
-    ``K`` = K(θ) at the current angle (Eq. 8, :func:`vane_factor`); returns K at the new angle.
-    """
+def substep_linear(st, prm, u_l, h):
+    """The cylinder axis over h seconds: valve #1 spool, piston, chambers, their sensor lags."""
     pa = prm[P_PA]
     RT = prm[P_RT]
     n = prm[P_N]
     C = prm[P_C1T]
-    # --- 1. spools
+    # --- 1. spool
     y_l = spool_step(st, prm, P_VALVE_L, S_SL, S_SDL, S_YL, u_l)
-    y_r = spool_step(st, prm, P_VALVE_R, S_SR, S_SDR, S_YR, u_r)
     bl = P_VALVE_L
     # --- 2. piston, Eq. 1 (errata: −A_r p_a)
     x = st[S_X]
@@ -381,6 +377,25 @@ def substep(st, prm, u_l, u_r, h, K):
     st[S_V] = v_new
     st[S_PC1] = p1n
     st[S_PC2] = p2n
+    # --- 5. sensor lags
+    ap = prm[P_PALPHA]
+    st[S_FP1] += ap * (p1n - st[S_FP1])
+    st[S_FP2] += ap * (p2n - st[S_FP2])
+    st[S_FX] += prm[P_XALPHA] * (x_new - st[S_FX])
+
+
+@njit(**_JIT, inline="always")
+def substep_rotary(st, prm, u_r, h, K):
+    """The motor axis over h seconds: valve #2 spool, motor, its chambers, the inlet sensor lag.
+
+    ``K`` = K(θ) at the current angle (Eq. 8, :func:`vane_factor`); returns K at the new angle.
+    """
+    pa = prm[P_PA]
+    RT = prm[P_RT]
+    n = prm[P_N]
+    C = prm[P_C1T]
+    # --- 1. spool
+    y_r = spool_step(st, prm, P_VALVE_R, S_SR, S_SDR, S_YR, u_r)
     # --- 4. motor, Eq. 7–10
     th = st[S_TH]
     om = st[S_OM]
@@ -419,12 +434,21 @@ def substep(st, prm, u_l, u_r, h, K):
     st[S_OM] = om_new
     st[S_PM1] = pm1n
     st[S_PM2] = pm2n
-    # --- 5. sensor lags
-    ap = prm[P_PALPHA]
-    st[S_FP1] += ap * (p1n - st[S_FP1])
-    st[S_FP2] += ap * (p2n - st[S_FP2])
-    st[S_FPM1] += ap * (pm1n - st[S_FPM1])
-    st[S_FX] += prm[P_XALPHA] * (x_new - st[S_FX])
+    # --- 5. sensor lag
+    st[S_FPM1] += prm[P_PALPHA] * (pm1n - st[S_FPM1])
+    return K
+
+
+@njit(**_JIT, inline="always")
+def substep(st, prm, u_l, u_r, h, K):
+    """Advance both axes and the sensor lags by h seconds (inputs u_l, u_r held).
+
+    The axes share no state (each has its own valve, chambers and sensors), so
+    stepping one after the other is the same arithmetic as interleaved. ``K`` =
+    K(θ) at the current angle (Eq. 8, :func:`vane_factor`); returns K at the new angle.
+    """
+    substep_linear(st, prm, u_l, h)
+    K = substep_rotary(st, prm, u_r, h, K)
     st[S_T] += h
     return K
 

@@ -232,7 +232,7 @@ class LinearParams:
         lo=1.0,
         hi=3.0,
         desc="static (breakaway) friction / A_f",
-        source="estimated: middle of the 1.3-2x range for elastomer (PPV) piston seals quoted in DESIGN §8; no DSBC-32 measurement found; range: the quoted 1.3-2x",
+        source="estimated: neither Festo nor the paper gives a breakaway figure for the DSBC-32 (Eq. 2 fits sliding only); 1.5 (4.4 N against 2.95 N sliding) is a guess between no breakaway (1.0) and twice the sliding level, chosen so stick-slip exists on the twin; pneu identify fits it from pulses started at rest; range [1.3, 2.0] estimated the same way (stick-slip present, up to twice the sliding level)",
         band=(1.3, 2.0),
     )
     v_s: float = param(

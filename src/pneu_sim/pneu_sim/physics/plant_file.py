@@ -35,6 +35,7 @@ __all__ = [
     "params_from_tree",
     "plant_from_tree",
     "plant_to_yaml_tree",
+    "plant_tree_yaml",
 ]
 
 _LEAF_KEYS = ("value", "unit", "source", "range", "alternatives")
@@ -160,11 +161,9 @@ def dump_plant_yaml(p: PlantParams | None = None, ranges: PlantRanges | None = N
     :func:`pneu_sim.physics.ranges.table_ranges` for the values of ``p``); checked
     like a loaded file's, so the text always loads back.
     """
-    import yaml
-
     p = validate(p if p is not None else PlantParams())
     unc = ranges if ranges is not None else table_ranges(p)
-    lines = [
+    header = [
         "# Plant of the linear-rotary pneumatic actuator twin (pneu_sim).",
         "# Each leaf: value, unit (must match the code), source (paper table, datasheet,",
         "# or 'estimated: why'). SI units, pressures absolute, except rotary.M_v (N*m/rpm, as",
@@ -172,6 +171,17 @@ def dump_plant_yaml(p: PlantParams | None = None, ranges: PlantRanges | None = N
         "# (what pneu sweep draws from). Generated from pneu_sim.physics.params.PlantParams",
         "# defaults; edit values freely.",
     ]
+    tree = plant_to_yaml_tree(p, unc)
+    plant_from_tree(tree)  # the same checks as loading: what is written loads back
+    return plant_tree_yaml(tree, header)
+
+
+def plant_tree_yaml(tree: Mapping[str, Any], header: list[str]) -> str:
+    """YAML text of a plant.yaml tree: ``header`` comment lines, then one flow-style line
+    per leaf (every key of a leaf kept, in its order)."""
+    import yaml
+
+    lines = list(header)
 
     def emit(tree: Mapping[str, Any], indent: str) -> None:
         for key, node in tree.items():
@@ -188,7 +198,5 @@ def dump_plant_yaml(p: PlantParams | None = None, ranges: PlantRanges | None = N
                 lines.append(f"{indent}{key}:")
                 emit(node, indent + "  ")
 
-    tree = plant_to_yaml_tree(p, unc)
-    plant_from_tree(tree)  # the same checks as loading: what is written loads back
     emit(tree, "")
     return "\n".join(lines) + "\n"

@@ -1,0 +1,121 @@
+"""The excitation experiment over ROS: ``ros2 launch pneu_control excite.launch.py``.
+
+On the twin (``target:=sim``, lockstep by default: the in-process ``pneu excite``
+numbers) or on the rig (``target:=rig``: the driver, realtime)::
+
+    ros2 launch pneu_control excite.launch.py target:=sim axes:=both seed:=0 out:=/tmp/excite
+    ros2 launch pneu_control excite.launch.py target:=rig axes:=linear out:=/tmp/rig_excite
+    pneu identify /tmp/excite/run.mcap --out plant_identified.yaml
+
+The exciter node answers each sample with the designed valve command
+(closed-loop segments included), the logger writes ``<out>/run.mcap`` with the
+design in its metadata. On the twin the sim stops after the design (``duration``
+= the design's); on the rig stop with Ctrl-C after the design's duration
+(printed at start): the driver writes 5 V, the logger finishes the bag.
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch.actions import Shutdown
+from launch_ros.actions import Node
+from pneu_msgs_py.nodes.launch_graph import AXES_OF, launch_description
+
+ARGS = [
+    ("target", "sim", "sim (the twin, sim node) or rig (the driver)", ["sim", "rig"]),
+    ("axes", "both", "excited axes (the others hold 5 V)", list(AXES_OF)),
+    ("seed", "0", "design seed (and the twin's noise seed)", None),
+    ("level", "full", "full (<= 2 min per axis) or quick (~45 s)", ["full", "quick"]),
+    ("mode", "", "lockstep or realtime ('' = lockstep on the sim, realtime on the rig)", ["", "lockstep", "realtime"]),
+    ("out", "out/excite", "directory of the bag (run.mcap)", None),
+    ("plant_file", "", "the twin's plant.yaml ('' = installed config/plant.yaml)", None),
+    ("rig_file", "", "rig YAML ('' = installed config/rig.yaml)", None),
+]  # fmt: skip
+
+
+def _setup(arg: dict[str, str]) -> list:
+    from pneu_control.sysid.design import design_for
+
+    config = os.path.join(get_package_share_directory("pneu_control"), "config")
+    axes = AXES_OF[arg["axes"]]
+    bag = os.path.join(arg["out"], "run.mcap")
+    if os.path.exists(bag):  # a run is never overwritten
+        raise RuntimeError(f"out: {bag} exists; choose another out:= for this run")
+    sim = arg["target"] == "sim"
+    mode = arg["mode"] or ("lockstep" if sim else "realtime")
+    lockstep = mode == "lockstep"
+    duration = max(design_for(a, int(arg["seed"]), arg["level"]).duration_s for a in axes)
+    if sim:
+        driver = Node(
+            package="pneu_sim",
+            executable="sim_node",
+            name="pneu_sim",
+            output="screen",
+            parameters=[
+                {
+                    "mode": mode,
+                    "axes": arg["axes"],
+                    "duration_s": float(duration),
+                    "seed": int(arg["seed"]),
+                    "safety": True,
+                    "plant_file": arg["plant_file"] or os.path.join(config, "plant.yaml"),
+                    "safety_file": os.path.join(config, "safety.yaml"),
+                    # before sample 0: every sensor topic matched (the exciter and the
+                    # logger take all five) and the logger holding every node's parameters
+                    "startup.min_subscribers": 2,
+                    "startup.wait_for_logger": True,
+                }
+            ],
+            on_exit=[Shutdown(reason="excitation finished")],
+        )
+    else:
+        driver = Node(
+            package="pneu_driver",
+            executable="driver_node",
+            name="pneu_driver",
+            output="screen",
+            parameters=[
+                {
+                    "rig_file": arg["rig_file"] or os.path.join(config, "rig.yaml"),
+                    "safety_file": os.path.join(config, "safety.yaml"),
+                    "axes": arg["axes"],
+                }
+            ],
+            on_exit=[Shutdown(reason="driver stopped")],
+        )
+    exciter = Node(
+        package="pneu_control",
+        executable="exciter",
+        name="pneu_exciter",
+        output="screen",
+        parameters=[
+            {
+                "axes": arg["axes"],
+                "seed": int(arg["seed"]),
+                "level": arg["level"],
+                "mode": mode,
+                "use_sim_time": lockstep,
+            }
+        ],
+    )
+    logger = Node(
+        package="pneu_control",
+        executable="logger",
+        name="logger",
+        output="screen",
+        parameters=[
+            {
+                "out": arg["out"],
+                "mode": mode,
+                "use_sim_time": lockstep,
+                "recorder": "pneu",
+                "bag_name": "run.mcap",
+            }
+        ],
+        sigterm_timeout="15",  # the run's metadata is written at shutdown
+    )
+    return [driver, exciter, logger]
+
+
+def generate_launch_description():
+    return launch_description(ARGS, _setup)

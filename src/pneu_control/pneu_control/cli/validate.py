@@ -1,0 +1,91 @@
+"""``pneu validate``: replay bags through a twin and report the fit per signal, with overlays."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+NAME = "validate"
+HELP = "replay bags through a twin (open loop on the recorded voltages, or closed loop) and report the fit %% per signal"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("bags", nargs="+", metavar="BAG")
+    p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
+    p.add_argument("--mode", choices=("open", "closed", "auto"), default="open",
+                   help="open: the recorded voltages (default); closed: the recorded controller "
+                   "or excitation again; auto: closed where the bag says what ran")  # fmt: skip
+    p.add_argument("--horizon", type=float, default=math.inf, metavar="S",
+                   help="open loop: restart from the measured state every S seconds (default: never)")  # fmt: skip
+    p.add_argument("--out", default=None, metavar="DIR", help="overlay figures and validate.json")
+    p.add_argument("--min-fit", type=float, default=None, metavar="PCT",
+                   help="exit 1 if a held-out bag's signal fits below PCT")  # fmt: skip
+
+
+def _used_by_identify(plant_file: str | None) -> set[str]:
+    """Bags the plant was identified from (its .identify.json), to mark the others held out."""
+    if not plant_file:
+        return set()
+    rep = Path(plant_file).with_suffix(".identify.json")
+    if not rep.is_file():
+        return set()
+    return {str(Path(b).resolve()) for b in json.loads(rep.read_text()).get("bags", [])}
+
+
+def run(args: argparse.Namespace) -> int:
+    from pneu_sim.physics.plant_file import load_plant
+
+    from pneu_control.cli.identify import _resolve
+    from pneu_control.sysid.record import load_record
+    from pneu_control.sysid.validate import plot_validation, validate_record, write_report
+
+    plant = load_plant(args.plant)
+    used = _used_by_identify(args.plant)
+    out = Path(args.out) if args.out else None
+    if out:
+        out.mkdir(parents=True, exist_ok=True)
+    results = []
+    for i, bag in enumerate(args.bags):
+        rec = load_record(_resolve(bag))
+        held = str(Path(rec.path).resolve()) not in used
+        v = validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
+        if out:
+            v.figure = str(
+                plot_validation(v, out / f"validate_{i:02d}_{Path(rec.path).parent.name}.png")
+            )
+        results.append(v)
+    names = ["x", "p_c1", "p_c2", "p_m1", "omega"]
+    print(
+        "| bag | held out | mode | "
+        + " | ".join(f"fit {n} %" for n in names)
+        + " | offsets (kPa) |"
+    )
+    print("|---|---|---|" + "---|" * len(names) + "---|")
+    worst = math.inf
+    for v in results:
+        cells = [f"{v.fits[n]:.1f}" if n in v.fits else "—" for n in names]
+        offs = ", ".join(f"{k} {x / 1e3:+.2f}" for k, x in v.offsets.items())
+        print(
+            f"| {v.bag} | {'yes' if v.held_out else 'no (identify)'} | {v.mode} | "
+            + " | ".join(cells)
+            + f" | {offs} |"
+        )
+        if v.held_out and v.fits:
+            worst = min(worst, min(v.fits.values()))
+    if not any(v.held_out for v in results):
+        print(
+            "warning: every bag was used by identify; a validation needs held-out bags",
+            file=sys.stderr,
+        )
+    if out:
+        write_report(results, out / "validate.json")
+        print(f"wrote {out}/validate.json and {len(results)} overlay figure(s)", file=sys.stderr)
+    if args.min_fit is not None and worst < args.min_fit:
+        print(
+            f"pneu validate: a held-out fit is {worst:.1f} % < {args.min_fit:g} %", file=sys.stderr
+        )
+        return 1
+    return 0

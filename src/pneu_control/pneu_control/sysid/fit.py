@@ -1,0 +1,480 @@
+"""Output-error fit of the twin to bags: least squares over the uncertain parameters, with statistics.
+
+Per axis (the cylinder and the motor share only the polytropic index, fitted
+on the cylinder first), the residual is the difference between each recorded
+signal and the twin replayed on the recorded voltages
+(:mod:`pneu_control.sysid.shooting`), signal by signal divided by the
+signal's spread, so the cost is the sum over signals of (1 − fit)² with fit
+as ``pneu validate`` reports it. ``scipy.optimize.least_squares`` (trust
+region reflective, within the physical bounds of
+:mod:`pneu_control.sysid.model`) minimises it; the Jacobian is by finite
+differences of relative size ``diff_step``.
+
+Besides the plant parameters each bag gets its pressure sensors' offsets
+(nuisance parameters: the Huba 511's ±0.5 % FS), reported but not written
+to the plant file.
+
+Statistics at the optimum (linearised, Ljung's *System Identification*
+§9.3): cov = s² (JᵀJ)⁻¹ with s² = Σr²/(m − p), inflated by the residuals'
+integrated autocorrelation time (they are far from white: one 1 ms sample
+is not one independent observation); 95 % intervals ±1.96σ; the
+correlation matrix of the estimates, and every pair with |ρ| > 0.95 is
+reported as not separately identifiable from these bags.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from pneu_control.sysid import model, shooting
+from pneu_control.sysid.record import AXIS_SIGNALS, Record
+
+__all__ = ["AxisFit", "FitOptions", "fit_axis"]
+
+_OFFSET_WIDTH = 5e3  # Pa: z = 1 is one Huba accuracy band
+# Huba 511: ±0.5 % FS = ±5 kPa; the bound allows 1.5x that, so an offset cannot
+# absorb what the supply pressure or the flow curve should explain
+_OFFSET_BOUND = 7.5e3  # Pa
+_PRESSURE_OF = {"linear": ("p_c1", "p_c2"), "rotary": ("p_m1",)}
+CORRELATED = 0.95
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    segment_s: dict[str, float] = field(default_factory=lambda: {"linear": 1.0, "rotary": 2.0})
+    decimate: int = 4  # residual every 4th sample
+    diff_step: float = 3e-3
+    max_nfev: int = 40
+    ftol: float = 1e-3  # stop when a step lowers the cost by less than 0.1 %
+    xtol: float = 1e-4
+    params: tuple[str, ...] | None = None  # names to fit (default: every parameter of the axis)
+    short_segment_s: float = 0.2  # the flow-curve stage's smooth cost (see _scan_dead_band)
+    short_every: int = 3  # ... on every 3rd short segment
+
+
+@dataclass
+class AxisFit:
+    axis: str
+    names: list[str]
+    units: list[str]
+    base: list[float]
+    value: list[float]
+    sigma: list[float]  # 1 σ, in the parameter's unit
+    corr: np.ndarray
+    offsets: dict[str, dict[str, float]]  # record name -> signal -> Pa
+    offsets_sigma: dict[str, dict[str, float]]
+    cost_start: float
+    cost: float
+    nfev: int
+    wall_s: float
+    inflation: float
+    n_residuals: int
+    status: str
+    plant: object = None  # the fitted PlantParams
+
+    def ci95(self, i: int) -> float:
+        return 1.96 * self.sigma[i]
+
+    def rel_ci95(self, i: int) -> float:
+        """95 % half-width relative to the value (log parameters; a dead band: in V)."""
+        v = self.value[i]
+        return self.ci95(i) / abs(v) if v else math.inf
+
+    def correlated_pairs(self, limit: float = CORRELATED) -> list[tuple[str, str, float]]:
+        out = []
+        n = len(self.names)
+        for i in range(n):
+            for j in range(i + 1, n):
+                r = float(self.corr[i, j])
+                if abs(r) > limit:
+                    out.append((self.names[i], self.names[j], r))
+        return out
+
+
+def _autocorr_time(r: np.ndarray, max_lag: int = 200) -> float:
+    """Integrated autocorrelation time 1 + 2 Σ ρ(k) (truncated at the first ρ ≤ 0)."""
+    r = r - r.mean()
+    v = float(np.dot(r, r))
+    if v <= 0.0 or len(r) < 4:
+        return 1.0
+    tau = 1.0
+    for k in range(1, min(max_lag, len(r) // 4)):
+        rho = float(np.dot(r[:-k], r[k:])) / v
+        if rho <= 0.0:
+            break
+        tau += 2.0 * rho
+    return tau
+
+
+def fit_axis(
+    axis: str,
+    base,
+    records: list[Record],
+    options: FitOptions | None = None,
+    log: Callable[[str], None] = print,
+) -> AxisFit:
+    """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``.
+
+    Stage 1: the valve's flow curve (scale and dead band: what sets the
+    operating points, and what a start far off gets most wrong) by
+    :func:`_scan_dead_band`; stage 2: every parameter by least squares from
+    there -- otherwise the friction, supply and exhaust parameters absorb a
+    wrong flow curve (a local minimum). When stage 2 moves the dead band away
+    from the scan's pick, the scan runs again with the other parameters as
+    fitted (stage 2 again if it finds a lower cost elsewhere).
+    """
+    options = options or FitOptions()
+    names = options.params or tuple(p.name for p in model.AXIS_PARAMS[axis])
+    first = tuple(n for n in names if n.startswith("valve_") and n.split(".")[1] in _STAGE1)
+    full = _Problem(axis, base, records, replace(options, params=names))
+    if not {f"{'valve_' + axis}.Q_n", f"valve_{axis}.{model.DEAD_BAND}"} <= set(first):
+        return full.solve(None, log)
+    log(f"  {axis}: stage 1, the valve's flow curve ({', '.join(first)})")
+    start, _ = _flow_curve_start(axis, base, records, options, first, {}, log)
+    log(f"  {axis}: stage 2, every parameter")
+    fit = full.solve(start, log)
+    # The scan saw the other parameters at their start values; when stage 2 moved the dead
+    # band away from its pick, those biased it (a wrong inertia, say): scan again with the
+    # fitted values, and run stage 2 once more if that finds a lower cost elsewhere.
+    db = f"valve_{axis}.{model.DEAD_BAND}"
+    d_fit = fit.value[fit.names.index(db)]
+    if abs(d_fit - start[db]) <= 0.01:
+        return fit
+    others = [p for p in model.AXIS_PARAMS[axis] if p.name in names and p.name not in first]
+    fitted = dict(zip(fit.names, fit.value))
+    base2 = model.apply(base, tuple(others), [fitted[p.name] for p in others])
+    offs = {f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()}
+    log(f"  {axis}: stage 1 again, the other parameters as fitted")
+    start2, cost2 = _flow_curve_start(axis, base2, records, options, first, offs, log)
+    if cost2 >= fit.cost or abs(start2[db] - d_fit) <= 0.005:
+        return fit
+    log(f"  {axis}: stage 2 again, from dead band {start2[db]:+.3f} V")
+    fit2 = full.solve({**fitted, **offs, **start2}, log)
+    return fit2 if fit2.cost < fit.cost else fit
+
+
+def _flow_curve_start(axis, base, records, options, first, offsets, log):
+    """Stage 1 on ``base``: the start values of the flow curve (and offsets) and their cost."""
+    long_ = _Problem(axis, base, records, replace(options, params=first))
+    short = _Problem(
+        axis,
+        base,
+        records,
+        replace(options, params=first, segment_s={axis: options.short_segment_s}),
+        every=options.short_every,
+    )
+    z, cost = _scan_dead_band(long_, short, log, offsets)
+    vals, offs = long_.unpack(z)
+    start = dict(zip(first, vals))
+    start.update(long_.offset_start(offs))
+    return start, cost
+
+
+_STAGE1 = ("Q_n", model.DEAD_BAND, "leak_fraction")
+
+
+class _Problem:
+    """The least-squares problem of one axis: parameters (as z), residuals, solve, statistics."""
+
+    def __init__(self, axis: str, base, records: list[Record], options: FitOptions, every: int = 1):
+        self.axis, self.base, self.options = axis, base, options
+        self.params = tuple(p for p in model.AXIS_PARAMS[axis] if p.name in options.params)
+        self.p0 = [model.base_value(base, p) for p in self.params]
+        bounds = []
+        for p, b in zip(self.params, self.p0):
+            lo, hi = p.lo, p.hi
+            if p.name.endswith("." + model.DEAD_BAND):
+                table = getattr(base, p.name.split(".")[0]).du_table
+                lo, hi = max(lo, -0.95 * table[1]), min(hi, 5.0 - table[-1])
+            bounds.append((p.to_z(lo, b), p.to_z(hi, b)))
+        used = []
+        for r in records:
+            seg = shooting.segments_of(r, axis, options.segment_s[axis])
+            if every > 1:
+                seg = shooting.Segments(seg.starts[::every], seg.lengths[::every])
+            if len(seg):
+                used.append((r, seg))
+        if not used:
+            raise ValueError(
+                f"{axis}: no usable data in the bags (axis not excited or all invalid)"
+            )
+        self.used = used
+        self.signals = AXIS_SIGNALS[axis]
+        self.pnames = _PRESSURE_OF[axis]
+        self.scale = {}
+        for name in self.signals:  # the signals' spreads: fixed residual weights
+            vals = np.concatenate([r.y[name][s.index] for r, s in used])
+            self.scale[name] = float(np.std(vals)) or 1.0
+        self.n_p = len(self.params)
+        self.n_off = len(self.pnames) * len(used)
+        dec = options.decimate
+        self.meas = [{n: r.y[n][s.index][::dec] for n in self.signals} for r, s in used]
+        self.pivot = _pivots(axis, base, self.params, used)
+        ob = _OFFSET_BOUND / _OFFSET_WIDTH
+        self.lo = np.array([b[0] for b in bounds] + [-ob] * self.n_off)
+        self.hi = np.array([b[1] for b in bounds] + [ob] * self.n_off)
+
+    def unpack(self, z: np.ndarray) -> tuple[list[float], list[dict[str, float]]]:
+        n_p, k = self.n_p, len(self.pnames)
+        vals = [
+            min(max(p.from_z(float(zi), b), p.lo), p.hi)  # rounding at a bound
+            for p, zi, b in zip(self.params, z[:n_p], self.p0)
+        ]
+        for i_q, factor in self.pivot:  # Q_n from the pivot flow, dead band and supply
+            vals[i_q] = vals[i_q] * factor(vals)
+        offs = []
+        for j in range(len(self.used)):
+            zo = z[n_p + j * k : n_p + (j + 1) * k]
+            offs.append({name: float(v) * _OFFSET_WIDTH for name, v in zip(self.pnames, zo)})
+        return vals, offs
+
+    def offset_start(self, offs: list[dict[str, float]]) -> dict[str, float]:
+        return {
+            f"offset:{r.path}:{k}": v for (r, _s), o in zip(self.used, offs) for k, v in o.items()
+        }
+
+    def z_start(self, start: dict[str, float] | None) -> np.ndarray:
+        z = np.zeros(self.n_p + self.n_off)
+        if start:
+            vals = [start.get(p.name, b) for p, b in zip(self.params, self.p0)]
+            for i_q, factor in self.pivot:
+                vals[i_q] = vals[i_q] / factor(vals)
+            for i, (p, b) in enumerate(zip(self.params, self.p0)):
+                z[i] = p.to_z(vals[i], b)
+            k = len(self.pnames)
+            for j, (rec, _s) in enumerate(self.used):
+                for q, name in enumerate(self.pnames):
+                    z[self.n_p + j * k + q] = (
+                        start.get(f"offset:{rec.path}:{name}", 0.0) / _OFFSET_WIDTH
+                    )
+        return np.clip(z, self.lo, self.hi)
+
+    def residuals(self, z: np.ndarray) -> np.ndarray:
+        vals, offs = self.unpack(z)
+        plant = model.apply(self.base, self.params, vals)
+        parts = []
+        dec = self.options.decimate
+        for (r, s), m, off in zip(self.used, self.meas, offs):
+            sim = shooting.simulate(plant, r, s, off, self.axis)
+            for name in self.signals:
+                parts.append((m[name] - sim[name][::dec]) / self.scale[name])
+        return np.concatenate(parts)
+
+    def cost(self, z: np.ndarray) -> float:
+        r = self.residuals(z)
+        return 0.5 * float(r @ r)
+
+    def solve(self, start: dict[str, float] | None, log: Callable[[str], None]) -> AxisFit:
+        from scipy.optimize import least_squares
+
+        axis, params, opt = self.axis, self.params, self.options
+        z0 = self.z_start(start)
+        t0 = time.perf_counter()
+        r0 = self.residuals(z0)
+        cost0 = 0.5 * float(r0 @ r0)
+        n_eval = [0]
+
+        def tracked(z):
+            n_eval[0] += 1
+            r = self.residuals(z)
+            if n_eval[0] % (len(z) + 1) == 1:
+                vals, _ = self.unpack(z)
+                shown = ", ".join(f"{p.name.split('.')[-1]}={v:.4g}" for p, v in zip(params, vals))
+                log(
+                    f"  {axis} eval {n_eval[0]:4d}  cost {0.5 * float(r @ r):.5g}  "
+                    f"({time.perf_counter() - t0:.0f} s)  {shown}"
+                )
+            return r
+
+        res = least_squares(
+            tracked,
+            z0,
+            bounds=(self.lo, self.hi),
+            method="trf",
+            x_scale=1.0,
+            diff_step=opt.diff_step,
+            max_nfev=opt.max_nfev,
+            xtol=opt.xtol,
+            ftol=opt.ftol,
+        )
+        return self._statistics(res, cost0, time.perf_counter() - t0)
+
+    def _statistics(self, res, cost0: float, wall: float) -> AxisFit:
+        n_p = self.n_p
+        J, r = res.jac, res.fun
+        m_res, p_all = J.shape
+        s2 = float(r @ r) / max(m_res - p_all, 1)
+        taus = []  # residual autocorrelation, per record and signal, along time
+        k = 0
+        for m in self.meas:
+            for name in self.signals:
+                n = m[name].size
+                taus.append(_autocorr_time(r[k : k + n]))
+                k += n
+        infl = float(np.median(taus)) if taus else 1.0
+        cov_z = np.linalg.pinv(J.T @ J) * s2 * infl
+        sd_z = np.sqrt(np.maximum(np.diag(cov_z), 0.0))
+        vals, offs = self.unpack(res.x)
+        # the parameters' covariance through the (pivoted) map z -> p, to first order
+        G = np.zeros((n_p, n_p))
+        for i in range(n_p):
+            dz = np.zeros_like(res.x)
+            dz[i] = 1e-6
+            up, _ = self.unpack(res.x + dz)
+            dn, _ = self.unpack(res.x - dz)
+            G[:, i] = (np.array(up) - np.array(dn)) / 2e-6
+        cov_p = G @ cov_z[:n_p, :n_p] @ G.T
+        sigma = [float(v) for v in np.sqrt(np.maximum(np.diag(cov_p), 0.0))]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            corr = np.nan_to_num(cov_p / np.outer(sigma, sigma))
+        offsets, offsets_sigma = {}, {}
+        kk = len(self.pnames)
+        for j, ((rec, _s), off) in enumerate(zip(self.used, offs)):
+            offsets[rec.path] = off
+            offsets_sigma[rec.path] = {
+                name: float(sd_z[n_p + j * kk + q] * _OFFSET_WIDTH)
+                for q, name in enumerate(self.pnames)
+            }
+        return AxisFit(
+            axis=self.axis,
+            names=[p.name for p in self.params],
+            units=[p.unit for p in self.params],
+            base=self.p0,
+            value=vals,
+            sigma=sigma,
+            corr=corr,
+            offsets=offsets,
+            offsets_sigma=offsets_sigma,
+            cost_start=cost0,
+            cost=float(res.cost),
+            nfev=int(res.nfev),
+            wall_s=wall,
+            inflation=infl,
+            n_residuals=m_res,
+            status=str(res.message),
+            plant=model.apply(self.base, self.params, vals),
+        )
+
+
+def _scan_dead_band(
+    long_: _Problem, short: _Problem, log: Callable[[str], None], offsets: dict[str, float]
+) -> tuple[np.ndarray, float]:
+    """The flow curve's start: the dead band by a scan along the cost's valley.
+
+    Every (Q_n, dead band) pair that gives the right flow where the valve mostly
+    ran lies in one long valley. Over a replay of seconds (``long_``) the true
+    pair sits in a narrow pit in it (the flow near the dead-band edge is very
+    sensitive); over short replays (``short``, 0.2 s) the valley is smooth. So
+    at each dead band on a grid (every 25 mV over the allowed range, then every
+    5 mV about the best; the fine steps fixed from the coarse best) the pivot flow, the centre leakage (it acts where the
+    dead band does, near 5 V) and the pressure offsets go to the smooth
+    valley's floor (damped Gauss-Newton steps on ``short``: converged at the
+    start's dead band, then warm-started point to point walking away from it
+    both ways -- a continuation along the valley) and the
+    long replay's cost scores the point; the best point starts stage 2.
+    """
+    i_d = [p.name for p in short.params].index(f"valve_{short.axis}.{model.DEAD_BAND}")
+    w = short.params[i_d].width
+    lo, hi = short.lo, short.hi
+    z = short.z_start(offsets)
+    t0 = time.perf_counter()
+
+    # the pivot flow, the other stage-1 parameters (the centre leakage) and the offsets
+    free = [i for i in range(short.n_p) if i != i_d] + list(
+        range(short.n_p, short.n_p + short.n_off)
+    )
+
+    def floor(zd: float, z: np.ndarray, steps: int = 2) -> np.ndarray:
+        z = z.copy()
+        z[i_d] = zd
+        r = short.residuals(z)
+        for _ in range(steps):
+            J = np.empty((len(r), len(free)))
+            for c, i in enumerate(free):
+                zq = z.copy()
+                zq[i] += 1e-2
+                J[:, c] = (short.residuals(zq) - r) / 1e-2
+            # damped (Levenberg) and limited: a direction the short replays hardly see
+            # (the cylinder's slow leakage) must not run away
+            JtJ = J.T @ J
+            damp = 1e-3 * np.diag(np.diag(JtJ)) + 1e-12 * np.eye(len(free))
+            step = np.clip(np.linalg.solve(JtJ + damp, -J.T @ r), -1.0, 1.0)
+            z[free] = np.clip(z[free] + step, lo[free], hi[free])
+            r = short.residuals(z)
+        return z
+
+    # continuation: converge at the start's dead band, then walk the valley floor both ways
+    z0 = floor(float(np.clip(z[i_d], lo[i_d], hi[i_d])), z, steps=5)
+    best = (long_.cost(z0), z0)
+    coarse = 0.025 / w
+    for direction in (1.0, -1.0):
+        z = z0
+        zd = z0[i_d] + direction * coarse
+        while lo[i_d] - 1e-9 <= zd <= hi[i_d] + 1e-9:
+            z = floor(float(zd), z)
+            cost = long_.cost(z)
+            if cost < best[0]:
+                best = (cost, z.copy())
+            zd += direction * coarse
+    log(
+        f"  {long_.axis}: dead band scan every 25 mV: best {best[1][i_d] * w:+.3f} V, "
+        f"cost {best[0]:.5g} ({time.perf_counter() - t0:.0f} s)"
+    )
+    centre = best[1]
+    for direction in (1.0, -1.0):  # then every 5 mV about the best
+        z = centre
+        for k in (1, 2, 3):
+            zd = float(np.clip(centre[i_d] + direction * k * 0.005 / w, lo[i_d], hi[i_d]))
+            z = floor(zd, z)
+            cost = long_.cost(z)
+            if cost < best[0]:
+                best = (cost, z.copy())
+    log(
+        f"  {long_.axis}: dead band scan every 5 mV: best {best[1][i_d] * w:+.3f} V, "
+        f"cost {best[0]:.5g} ({time.perf_counter() - t0:.0f} s)"
+    )
+    return best[1], best[0]
+
+
+def _pivots(axis: str, base, params, used) -> list[tuple[int, Callable[[list[float]], float]]]:
+    """Decouple a valve's flow scale from its dead band and its supply pressure.
+
+    With flow = Q_n · table(du − db), every (Q_n, db) pair that gives the same
+    flow at the voltages the rig mostly ran at lies in one long curved valley
+    of the cost; and the choked flow of Eq. 11 goes with Q_n · p_s, a second
+    valley. So the fit moves Q_eff, the flow at the pivot du_ref (the median
+    |u − 5 V| of the records, outside the dead band) at the start's supply, and
+    Q_n = Q_eff · table(du_ref) / table(du_ref − db) · p_s0 / p_s: the dead
+    band rotates the curve about the pivot, a supply change keeps the choked
+    flow. Returns (index of Q_n, factor(values)) pairs.
+    """
+    names = [p.name for p in params]
+    valve = "valve_" + axis
+    q, d = f"{valve}.Q_n", f"{valve}.{model.DEAD_BAND}"
+    if q not in names:
+        return []
+    supply = f"supply.p_s_{axis}"
+    i_d = names.index(d) if d in names else None
+    i_s = names.index(supply) if supply in names else None
+    v = getattr(base, valve)
+    du_t, fl_t = np.asarray(v.du_table), np.asarray(v.flow_table)
+    du = np.concatenate([np.abs(r.u[axis] - 5.0) for r, _s in used])
+    du = du[du > du_t[1] + 0.05]
+    du_ref = float(np.median(du)) if len(du) else float(du_t[len(du_t) // 2])
+    f_ref = float(np.interp(du_ref, du_t, fl_t))
+    p_s0 = float(getattr(base.supply, f"p_s_{axis}"))
+
+    def factor(vals: list[float]) -> float:
+        f = 1.0
+        if i_d is not None:
+            f *= f_ref / max(float(np.interp(du_ref - vals[i_d], du_t, fl_t)), 1e-6)
+        if i_s is not None:
+            f *= p_s0 / vals[i_s]
+        return f
+
+    return [(names.index(q), factor)]

@@ -1,0 +1,317 @@
+"""From bags to a calibrated plant.yaml: noise from quiet segments, the output-error fits, the file.
+
+Order: the sensor noise (first differences in the quiet segments: a robust
+σ = 1.4826·MAD(Δy)/√2, blind to slow drifts), then the cylinder (which also
+fixes the polytropic index), then the motor with that index. Each fitted
+value goes into a copy of the base plant.yaml tree -- every other leaf and
+every key of a leaf (unit, source, and any optional key such as a ``range``)
+is kept -- with ``source: identified from <bags> (±x %)`` (95 % interval).
+A parameter whose interval is wider than :data:`UNIDENTIFIABLE` of its value
+keeps the base value and says so in its source: the data do not determine it.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pneu_control.sysid import model
+from pneu_control.sysid.fit import AxisFit, FitOptions, fit_axis
+from pneu_control.sysid.record import Record
+
+__all__ = ["Identification", "UNIDENTIFIABLE", "estimate_noise", "identify", "write_plant"]
+
+UNIDENTIFIABLE = 0.5  # 95 % half-width / value above which a value is not taken
+_QUIET_SIGNALS = {"linear": ("x", "p_c1", "p_c2"), "rotary": ("p_m1",)}
+
+
+@dataclass
+class NoiseEstimate:
+    signal: str
+    sigma: float  # SI (m or Pa)
+    n: int
+
+    @property
+    def rel_ci95(self) -> float:
+        return 1.96 / math.sqrt(max(self.n - 1, 1))  # σ of a σ estimate ≈ σ/√(2N), ×√2 for Δy
+
+
+@dataclass
+class Identification:
+    base: Any  # PlantParams
+    plant: Any  # PlantParams, identified
+    fits: dict[str, AxisFit]
+    noise: dict[str, NoiseEstimate]
+    bags: list[str]
+    kept_base: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def rows(self) -> list[dict[str, Any]]:
+        out = []
+        for fit in self.fits.values():
+            for i, name in enumerate(fit.names):
+                out.append(
+                    {
+                        "name": name,
+                        "unit": fit.units[i],
+                        "base": fit.base[i],
+                        "value": fit.value[i],
+                        "ci95": fit.ci95(i),
+                        "rel_ci95": fit.rel_ci95(i) if not name.endswith(".dead_band") else None,
+                        "taken": name not in self.kept_base,
+                    }
+                )
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "bags": self.bags,
+            "parameters": self.rows(),
+            "correlated": {
+                a: [list(p) for p in f.correlated_pairs()] for a, f in self.fits.items()
+            },
+            "offsets_pa": {a: f.offsets for a, f in self.fits.items()},
+            "offsets_sigma_pa": {a: f.offsets_sigma for a, f in self.fits.items()},
+            "noise": {k: {"sigma": v.sigma, "n": v.n} for k, v in self.noise.items()},
+            "fit": {
+                a: {
+                    "cost_start": f.cost_start,
+                    "cost": f.cost,
+                    "nfev": f.nfev,
+                    "wall_s": f.wall_s,
+                    "residual_autocorrelation_time": f.inflation,
+                    "n_residuals": f.n_residuals,
+                    "status": f.status,
+                    "correlation": f.corr.tolist(),
+                    "names": f.names,
+                }
+                for a, f in self.fits.items()
+            },
+            "kept_base": self.kept_base,
+            "notes": self.notes,
+        }
+
+    def report(self) -> str:
+        lines = ["| parameter | base | identified | 95 % CI | taken |", "|---|---|---|---|---|"]
+        for r in self.rows():
+            ci = (
+                f"±{r['ci95']:.3g} {r['unit']}"
+                if r["rel_ci95"] is None
+                else f"±{100 * r['rel_ci95']:.2g} %"
+            )
+            lines.append(
+                f"| {r['name']} | {r['base']:.4g} | {r['value']:.4g} {r['unit']} | {ci} | "
+                f"{'yes' if r['taken'] else 'no (kept base)'} |"
+            )
+        for key, nz in self.noise.items():
+            unit = "m" if key == "x" else "Pa"
+            lines.append(
+                f"| noise σ {key} | | {nz.sigma:.4g} {unit} | ±{100 * nz.rel_ci95:.2g} % | yes |"
+            )
+        for axis, f in self.fits.items():
+            for a, b, rho in f.correlated_pairs():
+                lines.append(
+                    f"\n{axis}: {a} and {b} correlated (ρ = {rho:+.3f}): not separately identifiable from these bags"
+                )
+            for rec, offs in f.offsets.items():
+                s = ", ".join(f"{k} {v / 1e3:+.2f} kPa" for k, v in offs.items())
+                lines.append(
+                    f"\n{axis}: pressure sensor offsets in {rec}: {s} (not written: a property of the sensors)"
+                )
+        return "\n".join(lines) + "\n"
+
+
+def estimate_noise(records: list[Record], axes: tuple[str, ...]) -> dict[str, NoiseEstimate]:
+    """Sensor noise σ from the quiet segments (robust, from first differences)."""
+    out: dict[str, NoiseEstimate] = {}
+    for axis in axes:
+        for name in _QUIET_SIGNALS[axis]:
+            diffs = []
+            for rec in records:
+                if axis not in rec.commanded:
+                    continue
+                m = rec.quiet_mask(axis)
+                y = rec.y[name]
+                both = m[1:] & m[:-1] & np.isfinite(y[1:]) & np.isfinite(y[:-1])
+                diffs.append(np.diff(y)[both])
+            d = np.concatenate(diffs) if diffs else np.zeros(0)
+            if len(d) < 50:
+                continue
+            mad = float(np.median(np.abs(d - np.median(d))))
+            out[name] = NoiseEstimate(name, 1.4826 * mad / math.sqrt(2.0), len(d))
+    return out
+
+
+def _excited(records: list[Record], axis: str) -> list[Record]:
+    out = []
+    for r in records:
+        if axis in r.designs or (axis in r.commanded and np.ptp(r.u[axis][r.valid[axis]]) > 0.05):
+            out.append(r)
+    return out
+
+
+def identify(
+    records: list[Record],
+    base,
+    *,
+    axes: tuple[str, ...] | None = None,
+    options: FitOptions | None = None,
+    log: Callable[[str], None] = print,
+) -> Identification:
+    """Identify ``base`` (PlantParams) from ``records``; see the module docstring."""
+    options = options or FitOptions()
+    axes = axes or tuple(a for a in ("linear", "rotary") if _excited(records, a))
+    if not axes:
+        raise ValueError("no axis is excited in these bags (no design, no varying valve command)")
+    notes = [n for r in records for n in (f"{r.name}: {x}" for x in r.notes)]
+    noise = estimate_noise(records, axes)
+    plant = base
+    fits: dict[str, AxisFit] = {}
+    kept: list[str] = []
+    for axis in ("linear", "rotary"):
+        if axis not in axes:
+            continue
+        recs = _excited(records, axis)
+        log(f"{axis}: fitting {len(model.AXIS_PARAMS[axis])} parameters to {len(recs)} bag(s)")
+        fit = fit_axis(axis, plant, recs, options, log=log)
+        fits[axis] = fit
+        params = [p for p in model.AXIS_PARAMS[axis] if p.name in fit.names]
+        take = []
+        for i, p in enumerate(params):
+            rel = fit.ci95(i) / p.width if p.transform == "lin" else fit.rel_ci95(i)
+            if not math.isfinite(rel) or rel > UNIDENTIFIABLE:
+                kept.append(p.name)
+            else:
+                take.append(i)
+        plant = model.apply(plant, [params[i] for i in take], [fit.value[i] for i in take])
+        log(
+            f"{axis}: cost {fit.cost_start:.4g} -> {fit.cost:.4g} in {fit.nfev} steps, "
+            f"{fit.wall_s:.0f} s"
+        )
+    if "rotary" in axes and "linear" not in axes:
+        notes.append(
+            "ambient.n_poly not fitted: on the motor it only appears as n/V (fixed volumes); "
+            "the cylinder's moving piston separates it"
+        )
+    from pneu_msgs_py.params.core import with_updates
+
+    upd = {}
+    s = base.sensors
+    if "x" in noise:
+        upd["sensors.laser.sigma_m"] = noise["x"].sigma
+    pn = [noise[k].sigma for k in ("p_c1", "p_c2", "p_m1") if k in noise]
+    if pn:
+        upd["sensors.pressure.sigma_v"] = float(np.mean(pn)) * s.pressure.v_fs / s.pressure.fs
+    plant = with_updates(plant, upd)
+    return Identification(
+        base=base,
+        plant=plant,
+        fits=fits,
+        noise=noise,
+        bags=[r.path for r in records],
+        kept_base=kept,
+        notes=notes,
+    )
+
+
+def _core_leaves(tree: Any) -> Any:
+    if isinstance(tree, dict):
+        if "value" in tree and isinstance(tree.get("unit"), str):
+            return {k: tree[k] for k in ("value", "unit", "source") if k in tree}
+        return {k: _core_leaves(v) for k, v in tree.items()}
+    return tree
+
+
+def _set(tree: dict, dotted: str, value: Any, source: str, ci95: float | None = None) -> None:
+    """Set a leaf's value and source. An uncertainty the base gave it (an optional ``range``
+    or ``alternatives`` key, as ``pneu sweep`` reads them) is what identification just
+    measured: a range becomes the 95 % interval, alternatives are resolved (dropped)."""
+    node = tree
+    for key in dotted.split("."):
+        node = node[key]
+    node["value"] = value
+    node["source"] = source
+    if "range" in node and ci95 is not None and isinstance(value, float):
+        node["range"] = [value - ci95, value + ci95]
+    node.pop("alternatives", None)
+
+
+def write_plant(
+    ident: Identification, base_tree: dict, out: str | Path, *, force: bool = False
+) -> Path:
+    """Write the identified plant.yaml (validated before writing; never overwrites unless ``force``)."""
+    from pneu_msgs_py.params.core import flatten
+    from pneu_sim.physics.plant_file import params_from_tree, plant_tree_yaml
+
+    out = Path(out)
+    if out.exists() and not force:
+        raise FileExistsError(f"{out} exists; refusing to overwrite it (use --force)")
+    names = ", ".join(
+        Path(b).name if Path(b).name != "run.mcap" else str(Path(b).parent.name + "/run.mcap")
+        for b in ident.bags
+    )
+    tree = copy.deepcopy(base_tree)
+    values = flatten(ident.plant)
+    for fit in ident.fits.values():
+        for i, name in enumerate(fit.names):
+            if name.endswith("." + model.DEAD_BAND):
+                leaf = name.split(".")[0] + ".du_table"
+                if name in ident.kept_base:
+                    continue
+                _set(
+                    tree,
+                    leaf,
+                    [float(v) for v in values[leaf]],
+                    f"identified from {names}: the base breakpoints shifted by "
+                    f"{fit.value[i]:+.3f} V (±{fit.ci95(i):.3f} V)",
+                )
+                continue
+            if name in ident.kept_base:
+                node = tree
+                for key in name.split("."):
+                    node = node[key]
+                node["source"] = (
+                    f"not identifiable from {names} (95 % CI ±{100 * fit.rel_ci95(i):.0f} %): "
+                    f"base value kept ({node.get('source', '')})"
+                )
+                continue
+            _set(
+                tree,
+                name,
+                float(values[name]),
+                f"identified from {names} (±{100 * fit.rel_ci95(i):.2g} %)",
+                fit.ci95(i),
+            )
+    for key, leaf in (("x", "sensors.laser.sigma_m"), ("p", "sensors.pressure.sigma_v")):
+        nz = [v for k, v in ident.noise.items() if (k == "x") == (key == "x")]
+        if nz:
+            rel = min(v.rel_ci95 for v in nz)
+            _set(
+                tree,
+                leaf,
+                float(values[leaf]),
+                f"identified from the quiet segments of {names} (±{100 * rel:.2g} %)",
+            )
+    header = [
+        "# Plant of the linear-rotary pneumatic actuator twin (pneu_sim), identified by `pneu identify`",
+        f"# from {names}. Each leaf: value, unit, source; identified leaves say so, with their",
+        "# 95 % interval; everything else is the base file's. Pressures absolute, SI units.",
+    ]
+    text = plant_tree_yaml(tree, header)
+    import yaml
+
+    # the values load strictly, or nothing is written (checked on the leaves' value, unit and
+    # source: optional leaf keys, e.g. a range, are the base file's and kept as they are)
+    params_from_tree(_core_leaves(yaml.safe_load(text)))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    report = out.with_suffix(".identify.json")
+    report.write_text(json.dumps(ident.to_dict(), indent=2, sort_keys=True, default=float) + "\n")
+    return out

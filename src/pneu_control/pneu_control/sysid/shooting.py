@@ -1,0 +1,163 @@
+"""Replay a record through the twin in segments started from the measured state (multiple shooting).
+
+The cylinder is an integrator: a whole bag replayed open loop on its recorded
+voltages drifts away on any parameter error, and the fit would see the drift,
+not the physics. So the record is cut into segments of at most
+``segment_s``; each starts from the state the sensors give at its first
+sample (position and velocity from a local line through the laser samples,
+the pressures as a centred mean less their offsets, the encoder angle and
+the mean encoder speed around it, the motor exhaust pressure quasi-steady,
+the valve spools from one pass of the spool model over the recorded
+voltages) and runs open loop on the recorded voltages
+(:func:`pneu_sim.physics.replay.replay`). With an excitation design the cuts
+fall on its segment boundaries (the rig is at its calmest there: a pulse
+starts from rest and is replayed whole). ``segment_s`` = ∞ is a pure
+simulation from the first sample (MATLAB ``compare``'s default).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pneu_sim.physics import replay as rp
+
+from pneu_control.sysid.record import AXIS_SIGNALS, SIGNALS, Record
+
+__all__ = ["Segments", "initial_states", "segments_of", "simulate"]
+
+_COL = {"p_c1": rp.R_PC1, "p_c2": rp.R_PC2, "p_m1": rp.R_PM1, "x": rp.R_X, "theta": rp.R_TH, "omega": rp.R_OM}  # fmt: skip
+_X_FIT = 10  # samples either side for the position/velocity line at a segment start
+_W_AVG = 5  # samples either side for the mean encoder speed
+_P_AVG = 5  # samples either side for the pressures (a centred mean is unbiased on a ramp)
+
+
+@dataclass
+class Segments:
+    """Segments of one record: start sample indices and lengths (samples simulated)."""
+
+    starts: np.ndarray
+    lengths: np.ndarray
+
+    @property
+    def index(self) -> np.ndarray:
+        """Concatenated indices of the simulated samples (start + 1 ... start + length, per segment)."""
+        if not len(self.starts):
+            return np.zeros(0, dtype=np.int64)
+        return np.concatenate(
+            [np.arange(s + 1, s + 1 + n) for s, n in zip(self.starts, self.lengths)]
+        )
+
+    def __len__(self) -> int:
+        return len(self.starts)
+
+
+def _cuts(rec: Record, axis: str, segment_s: float) -> list[tuple[int, int]]:
+    """(start, length) pieces of at most ``segment_s``, on the design's boundaries if any."""
+    n = rec.n
+    first, last = _X_FIT, n - _X_FIT - 2
+    if math.isinf(segment_s):
+        return [(first, last - first)]
+    L = max(2, int(round(segment_s / rec.period_s)))
+    d = rec.designs.get(axis)
+    if d is None:
+        bounds = [*list(range(first, last, L)), last]
+    else:
+        marks = [int(round(s.t0_s / rec.period_s)) for s in d.segments] + [last]
+        bounds = []
+        for a, b in itertools.pairwise(marks):
+            a, b = max(a, first), min(b, last)
+            if b <= a:
+                continue
+            k = max(1, math.ceil((b - a) / L))
+            bounds.extend(a + (b - a) * i // k for i in range(k))
+        bounds.append(last)
+    return [(a, b - a) for a, b in itertools.pairwise(bounds) if b - a >= 2]
+
+
+def segments_of(rec: Record, axis: str, segment_s: float) -> Segments:
+    """Segments of at most ``segment_s`` (∞: one from the first sample) fully inside
+    ``rec.valid[axis]``, with every compared sample finite."""
+    ok = rec.valid[axis].copy()
+    for name in AXIS_SIGNALS[axis]:
+        ok &= np.isfinite(rec.y[name])
+    bad = np.concatenate(([0], np.cumsum(~ok)))
+    keep = [
+        (s, n)
+        for s, n in _cuts(rec, axis, segment_s)
+        if bad[s + n + 1] - bad[max(s - _X_FIT, 0)] == 0
+    ]
+    return Segments(
+        np.array([s for s, _ in keep], dtype=np.int64),
+        np.array([n for _, n in keep], dtype=np.int64),
+    )
+
+
+def _line(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Value at t = 0 and slope of the least-squares line through (t, y), NaNs dropped."""
+    m = np.isfinite(y)
+    if m.sum() < 2:
+        return (float(np.mean(y[m])) if m.any() else 0.0), 0.0
+    tt, yy = t[m], y[m]
+    a = np.polyfit(tt, yy, 1)
+    return float(a[1]), float(a[0])
+
+
+def _mean(v: np.ndarray, default: float) -> float:
+    m = np.isfinite(v)
+    return float(np.mean(v[m])) if m.any() else default
+
+
+def initial_states(
+    rec: Record, seg: Segments, offsets: dict[str, float], spools: dict[str, np.ndarray]
+) -> list[dict]:
+    """Measured state at each segment start (see the module docstring)."""
+    T = rec.period_s
+    tw = np.arange(-_X_FIT, _X_FIT + 1) * T
+    out = []
+    y = rec.y
+    for i0 in seg.starts.tolist():
+        x0, v0 = _line(tw, y["x"][i0 - _X_FIT : i0 + _X_FIT + 1])
+        om0 = _mean(y["omega"][max(i0 - _W_AVG + 1, 0) : i0 + _W_AVG + 1], 0.0)
+        th0 = y["theta"][i0]
+        pw = slice(i0 - _P_AVG, i0 + _P_AVG + 1)
+        out.append(
+            {
+                "x": x0 if math.isfinite(x0) else 0.0,
+                "v": v0 if math.isfinite(v0) else 0.0,
+                "p_c1": _mean(y["p_c1"][pw], 2e5) - offsets.get("p_c1", 0.0),
+                "p_c2": _mean(y["p_c2"][pw], 2e5) - offsets.get("p_c2", 0.0),
+                "p_m1": _mean(y["p_m1"][pw], 1.01325e5) - offsets.get("p_m1", 0.0),
+                "theta": float(th0) if math.isfinite(th0) else 0.0,
+                "omega": om0,
+                "u_linear": float(rec.u["linear"][i0 - 1]),
+                "u_rotary": float(rec.u["rotary"][i0 - 1]),
+                "spool_linear": tuple(spools["linear"][i0]),
+                "spool_rotary": tuple(spools["rotary"][i0]),
+            }
+        )
+    return out
+
+
+def simulate(
+    params, rec: Record, seg: Segments, offsets: dict[str, float], axes: str = "both"
+) -> dict[str, np.ndarray]:
+    """Replay every segment (``axes``: both, linear or rotary); returns SIGNALS -> simulated
+    sensor values at :attr:`Segments.index` (pressures with ``offsets`` added back, as the
+    sensors read them)."""
+    prm = rp.replay_params(params)
+    kbar = rp.mean_vane_factor(prm)
+    spools = {a: rp.spool_trajectory(prm, a, rec.u[a]) for a in ("linear", "rotary")}
+    states = initial_states(rec, seg, offsets, spools)
+    parts = []
+    ul, ur = rec.u["linear"], rec.u["rotary"]
+    for i0, n, s0 in zip(seg.starts.tolist(), seg.lengths.tolist(), states):
+        st = rp.replay_state(prm, params, kbar=kbar, **s0)
+        parts.append(rp.replay(st, prm, ul[i0 : i0 + n], ur[i0 : i0 + n], axes))
+    sim = np.concatenate(parts) if parts else np.zeros((0, rp.N_REPLAY))
+    out = {name: sim[:, _COL[name]] for name in SIGNALS}
+    for name, off in offsets.items():
+        out[name] = out[name] + off
+    return out

@@ -1,0 +1,228 @@
+"""The twin replayed on recorded valve voltages from a given state: noise-free, unquantised outputs.
+
+System identification and validation (``pneu_control.sysid``) simulate the twin
+on the voltages a bag says were on the valves, from a state built out of that
+bag's measurements, and compare the outputs with the recorded sensors. They
+need what the sensors *would* read without noise, offsets and AI/encoder
+quantisation -- smooth in the parameters, so a finite-difference Jacobian
+means something:
+
+- the lagged pressures p_c1, p_c2, p_m1 and the lagged laser position x
+  (the kernel's sensor lag states, Pa abs and m);
+- the motor angle θ and the mean speed over each period, (θ_k − θ_{k−1})/T,
+  which is what the encoder's Δcounts/T quantises (rad, rad/s).
+
+The dynamics are the kernel's own ``substep`` (one copy of the physics); the
+applied voltages go through the same AO clamp and quantisation
+(:func:`pneu_sim.physics.kernel.ao_value`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from pneu_sim.physics import kernel as k
+from pneu_sim.physics.pack import pack_params
+from pneu_sim.physics.params import PlantParams
+
+__all__ = [
+    "R_PC1",
+    "R_PC2",
+    "R_PM1",
+    "R_X",
+    "R_TH",
+    "R_OM",
+    "N_REPLAY",
+    "exhaust_pressure",
+    "mean_vane_factor",
+    "replay",
+    "replay_params",
+    "replay_state",
+    "spool_trajectory",
+]
+
+R_PC1, R_PC2, R_PM1, R_X, R_TH, R_OM = range(6)
+N_REPLAY = 6
+
+
+AXES_CODE = {"both": 0, "linear": 1, "rotary": 2}
+
+
+@njit(cache=True)
+def _replay(st, prm, u_l, u_r, out, which):
+    nsub = int(prm[k.P_NSUB])
+    h = prm[k.P_H]
+    T = prm[k.P_T]
+    for i in range(u_l.shape[0]):
+        ul = k.ao_value(prm, u_l[i])
+        ur = k.ao_value(prm, u_r[i])
+        st[k.S_UL] = ul
+        st[k.S_UR] = ur
+        th0 = st[k.S_TH]
+        K = k.vane_factor(prm, th0)
+        for _ in range(nsub):
+            if which != 2:
+                k.substep_linear(st, prm, ul, h)
+            if which != 1:
+                K = k.substep_rotary(st, prm, ur, h, K)
+            st[k.S_T] += h
+        out[i, 0] = st[k.S_FP1]
+        out[i, 1] = st[k.S_FP2]
+        out[i, 2] = st[k.S_FPM1]
+        out[i, 3] = st[k.S_FX]
+        out[i, 4] = st[k.S_TH]
+        out[i, 5] = (st[k.S_TH] - th0) / T
+
+
+@njit(cache=True)
+def _spools(prm, base, u, out):
+    st = np.zeros(k.N_STATE)
+    u0 = k.ao_value(prm, u[0])
+    st[k.S_SL] = u0
+    st[k.S_YL] = u0
+    nsub = int(prm[k.P_NSUB])
+    for i in range(u.shape[0]):
+        out[i, 0] = st[k.S_SL]
+        out[i, 1] = st[k.S_SDL]
+        out[i, 2] = st[k.S_YL]
+        ui = k.ao_value(prm, u[i])
+        for _ in range(nsub):
+            k.spool_step(st, prm, base, k.S_SL, k.S_SDL, k.S_YL, ui)
+
+
+def spool_trajectory(prm: np.ndarray, axis: str, u: np.ndarray) -> np.ndarray:
+    """(n, 3): the valve spool (position, velocity, opening after the play) at the start of each
+    period under the held voltages ``u`` -- the spool states at each sample, from rest at u[0].
+
+    The spool depends on nothing the identification fits, so one pass over a
+    record gives every segment its exact start (the play's state included).
+    """
+    base = k.P_VALVE_L if axis == "linear" else k.P_VALVE_R
+    uu = np.ascontiguousarray(u, dtype=np.float64)
+    out = np.empty((uu.shape[0], 3))
+    _spools(prm, base, uu, out)
+    return out
+
+
+def replay_params(params: PlantParams) -> np.ndarray:
+    """The kernel's parameter vector without sensor offsets (the replay has no noise)."""
+    return pack_params(params, None)
+
+
+def mean_vane_factor(prm: np.ndarray) -> float:
+    """K̄: the sector mean of Eq. 8's factor (m³), torque per pressure difference."""
+    th = np.linspace(0.0, 2.0 * math.pi / prm[k.P_NV], 65)
+    return float(np.mean([k.vane_factor(prm, t) for t in th]))
+
+
+def exhaust_pressure(prm: np.ndarray, p_m1: float, omega: float, kbar: float) -> float:
+    """Quasi-steady motor exhaust pressure p_m2 (Pa abs): silencer flow = swept + leakage.
+
+    p_m2 is not measured; its chamber is small and vents through the silencer
+    in milliseconds, so the balance K̄·ω·p_m1/(R T0) + k_leak (p_m1 − p_m2) =
+    ṁ_ex(p_m2 → p_a) (Eq. 11 through A_ex) sets it at a segment start.
+    ``kbar``: :func:`mean_vane_factor`.
+    """
+    pa = prm[k.P_PA]
+    RT = prm[k.P_RT]
+    base = k.P_VALVE_R
+    b, bl = prm[base + k.VB_B], prm[base + k.VB_BLAM]
+    lo, hi = pa, max(pa, p_m1)
+    if hi <= pa:
+        return pa
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        inflow = kbar * max(omega, 0.0) * p_m1 / RT + prm[k.P_KLK] * (p_m1 - mid)
+        out = k.iso_flow(mid, pa, prm[k.P_KEX], b, bl)[0]
+        if inflow > out:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def replay_state(
+    prm: np.ndarray,
+    params: PlantParams,
+    *,
+    x: float,
+    v: float,
+    p_c1: float,
+    p_c2: float,
+    theta: float,
+    omega: float,
+    p_m1: float,
+    u_linear: float,
+    u_rotary: float,
+    kbar: float | None = None,
+    spool_linear: tuple[float, float, float] | None = None,
+    spool_rotary: tuple[float, float, float] | None = None,
+) -> np.ndarray:
+    """A kernel state vector from measured values (SI, pressures absolute).
+
+    Spools from ``spool_linear`` / ``spool_rotary`` (position, velocity,
+    opening: :func:`spool_trajectory`) or else at rest at the voltages held
+    during the previous period (the spool settles in a few ms); p_m2 quasi-steady (:func:`exhaust_pressure`);
+    sensor lags at the measured values; gas masses p V / (R T0).
+    """
+    st = np.zeros(k.N_STATE)
+    lin = params.linear
+    half = 0.5 * lin.L
+    x = min(max(x, -half), half)
+    RT = prm[k.P_RT]
+    st[k.S_X] = x
+    st[k.S_V] = v
+    st[k.S_PC1] = p_c1
+    st[k.S_PC2] = p_c2
+    st[k.S_TH] = theta
+    st[k.S_OM] = omega
+    st[k.S_PM1] = p_m1
+    kbar = mean_vane_factor(prm) if kbar is None else kbar
+    st[k.S_PM2] = exhaust_pressure(prm, p_m1, omega, kbar)
+    for i_s, i_sd, i_y, u, sp in (
+        (k.S_SL, k.S_SDL, k.S_YL, u_linear, spool_linear),
+        (k.S_SR, k.S_SDR, k.S_YR, u_rotary, spool_rotary),
+    ):
+        if sp is None:
+            uq = k.ao_value(prm, u)
+            sp = (uq, 0.0, uq)
+        st[i_s], st[i_sd], st[i_y] = sp
+    st[k.S_UL] = st[k.S_SL]
+    st[k.S_UR] = st[k.S_SR]
+    st[k.S_MC1] = p_c1 * (lin.V_1d + lin.A_c1 * (half + x)) / RT
+    st[k.S_MC2] = p_c2 * (lin.V_2d + lin.A_c2 * (half - x)) / RT
+    st[k.S_FP1] = p_c1
+    st[k.S_FP2] = p_c2
+    st[k.S_FPM1] = p_m1
+    st[k.S_FX] = x
+    return st
+
+
+def replay(
+    st: np.ndarray,
+    prm: np.ndarray,
+    u_linear: np.ndarray,
+    u_rotary: np.ndarray,
+    axes: str = "both",
+) -> np.ndarray:
+    """Step ``st`` (in place) under the voltages held in each period; returns (n, 6) outputs.
+
+    ``axes``: ``both``, or ``linear`` / ``rotary`` to step only that axis (the
+    axes share no state; the other's outputs then hold their start values).
+
+    Row i is the sample at the end of period i: columns :data:`R_PC1`,
+    :data:`R_PC2`, :data:`R_PM1` (Pa abs), :data:`R_X` (m), :data:`R_TH`
+    (rad), :data:`R_OM` (rad/s, mean over the period).
+    """
+    u_l = np.ascontiguousarray(u_linear, dtype=np.float64)
+    u_r = np.ascontiguousarray(u_rotary, dtype=np.float64)
+    if u_l.shape != u_r.shape or u_l.ndim != 1:
+        raise ValueError("u_linear and u_rotary must be 1-D arrays of equal length")
+    if axes not in AXES_CODE:
+        raise ValueError(f"axes: {axes!r} refused; allowed: one of {', '.join(AXES_CODE)}")
+    out = np.empty((u_l.shape[0], N_REPLAY))
+    _replay(st, prm, u_l, u_r, out, AXES_CODE[axes])
+    return out

@@ -1,0 +1,86 @@
+"""The replay kernel: the twin's own physics on given voltages, outputs without noise or quantisation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pneu_msgs_py.params.core import with_updates
+from pneu_sim.physics import kernel as k
+from pneu_sim.physics import replay as rp
+from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.plant import Plant
+
+
+def _quiet(p: PlantParams) -> PlantParams:
+    return with_updates(
+        p,
+        {
+            "sensors.pressure.sigma_v": 0.0,
+            "sensors.pressure.accuracy_fs": 0.0,
+            "sensors.laser.sigma_m": 0.0,
+        },
+    )
+
+
+def test_replay_matches_the_plant_within_the_daq_quantum():
+    """From the plant's own state, the replay gives what its sensors read, to the AI/encoder LSB."""
+    p = _quiet(PlantParams())
+    plant = Plant(p, seed=1)
+    plant.reset(x0=-0.02)
+    rng = np.random.default_rng(0)
+    ul = 5.0 + np.repeat(rng.uniform(-1.5, 1.5, 40), 50)
+    ur = 5.6 + np.repeat(rng.uniform(-0.3, 0.4, 40), 50)
+    plant.run(np.full(200, 5.0), np.full(200, 5.6))  # a state in motion, not the reset one
+    st0 = plant._st.copy()
+    out = plant.run(ul, ur)
+    prm = rp.replay_params(p)
+    sim = rp.replay(st0.copy(), prm, ul, ur)
+    lsb_p = 20.0 / 2**16 * 1e5  # 16-bit AI over ±10 V, 1e5 Pa/V
+    lsb_x = 10.0 / 2**16 * 0.16 / 5.0
+    assert np.max(np.abs(sim[:, rp.R_PC1] - out[:, k.O_PC1])) <= lsb_p
+    assert np.max(np.abs(sim[:, rp.R_PM1] - out[:, k.O_PM1])) <= lsb_p
+    assert np.max(np.abs(sim[:, rp.R_X] - out[:, k.O_X])) <= lsb_x
+    # the encoder's speed is the mean speed over the period, quantised to one count per period
+    q = 2 * np.pi / 4000 / 1e-3
+    assert np.max(np.abs(sim[:, rp.R_OM] - out[:, k.O_OM])) <= q + 1e-9
+    assert np.ptp(out[:, k.O_X]) > 0.02 and np.ptp(out[:, k.O_OM]) > 50.0  # it did move
+
+
+@pytest.mark.parametrize("axes", ["linear", "rotary"])
+def test_one_axis_replay_is_the_same_arithmetic(axes):
+    p = PlantParams()
+    prm = rp.replay_params(p)
+    plant = Plant(p, seed=0)
+    plant.reset()
+    st = plant._st.copy()
+    ul = np.linspace(4.0, 6.5, 300)
+    ur = np.linspace(5.2, 6.2, 300)
+    both = rp.replay(st.copy(), prm, ul, ur, "both")
+    one = rp.replay(st.copy(), prm, ul, ur, axes)
+    cols = [rp.R_PC1, rp.R_PC2, rp.R_X] if axes == "linear" else [rp.R_PM1, rp.R_TH, rp.R_OM]
+    assert np.array_equal(both[:, cols], one[:, cols])
+
+
+def test_spool_trajectory_is_the_kernels_spool():
+    p = PlantParams()
+    prm = rp.replay_params(p)
+    u = 5.0 + np.repeat([0.0, 1.0, -0.5, 0.02, 0.0], 20)
+    traj = rp.spool_trajectory(prm, "linear", u)
+    st = np.zeros(k.N_STATE)
+    st[k.S_SL] = st[k.S_YL] = 5.0
+    for i in range(len(u)):
+        assert traj[i].tolist() == [st[k.S_SL], st[k.S_SDL], st[k.S_YL]]
+        for _ in range(p.sim.n_sub):
+            k.spool_step.py_func(
+                st, prm, k.P_VALVE_L, k.S_SL, k.S_SDL, k.S_YL, k.ao_value(prm, u[i])
+            )
+
+
+def test_exhaust_pressure_balances_the_silencer():
+    p = PlantParams()
+    prm = rp.replay_params(p)
+    kbar = rp.mean_vane_factor(prm)
+    assert rp.exhaust_pressure(prm, p.ambient.p_a, 0.0, kbar) == pytest.approx(p.ambient.p_a)
+    lo = rp.exhaust_pressure(prm, 2.0e5, 50.0, kbar)
+    hi = rp.exhaust_pressure(prm, 2.0e5, 120.0, kbar)
+    assert p.ambient.p_a < lo < hi < 2.0e5  # faster motor, more swept flow, higher p_m2
