@@ -160,9 +160,12 @@ def test_unknown_axis_and_section_refused(tmp_path):
     f.write_text("linear_controller:\n  ros__parameters:\n    algorithm: pid\n")
     with pytest.raises(ParamError, match="rotary_controller"):
         load_controller_params("rotary", f)
-    assert load_controller_params("linear", f).algorithm == "pid"  # missing keys: defaults
-    f.write_text("linear_controller:\n  ros__parameters:\n    pid: {kq: 1.0}\n")
-    with pytest.raises(ParamError, match="pid.kq"):
+    with pytest.raises(
+        ParamError, match=r"c\.yaml:3:5: pid: missing; required: the parameter group kp"
+    ):
+        load_controller_params("linear", f)  # missing keys refused, as in every config file
+    f.write_text(Path(CONFIG).read_text().replace("      kp: 0.38", "      kq: 0.38", 1))
+    with pytest.raises(ParamError, match=r"c\.yaml:\d+:7: pid.kq: 0.38 refused; allowed: no such"):
         load_controller_params("linear", f)
 
 

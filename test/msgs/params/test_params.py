@@ -34,7 +34,9 @@ def test_defaults_and_flatten():
 
 
 def test_strict_missing_key_named():
-    with pytest.raises(ParamError, match=r"^inner: None refused"):
+    with pytest.raises(
+        ParamError, match=r"^inner: missing; required: the parameter group epsilon, n"
+    ):
         from_dict(Outer, {"algorithm": "pid", "omega_0": 1.0}, strict=True)
 
 

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from pneu_msgs_py.params.core import ParamError, flatten, from_dict, param, with_updates
+from pneu_msgs_py.params.yaml_file import load_yaml, located
 
 from pneu_control.algorithms import EsoSmcParams, EsoSmcPlusParams, LadrcParams, PidParams
 
@@ -270,9 +271,10 @@ def _section(data: Any, axis: str, path: Path) -> Mapping[str, Any]:
     return params
 
 
-def params_from_mapping(data: Mapping[str, Any]) -> AxisControllerParams:
-    """Build from a nested (YAML-shaped) mapping; missing keys take defaults."""
-    return from_dict(AxisControllerParams, data, strict=False)
+def params_from_mapping(data: Mapping[str, Any], *, strict: bool = False) -> AxisControllerParams:
+    """Build from a nested (YAML-shaped) mapping; ``strict``: every key required (a file),
+    else missing keys take defaults (parameters a node reported)."""
+    return from_dict(AxisControllerParams, data, strict=strict)
 
 
 def load_controller_params(
@@ -282,18 +284,19 @@ def load_controller_params(
 ) -> AxisControllerParams:
     """Read ``<axis>_controller.ros__parameters`` of ``path`` (default config/controllers.yaml).
 
+    The file is read strictly (:mod:`pneu_msgs_py.params.yaml_file`): every
+    parameter of the section must be there, none unknown, none twice.
+
     ``overrides`` are dotted names (``"eso_smc.epsilon": 900``) applied on top
     and validated with the file's values as one set; the reference (and its
     waypoint file) is checked by building it.
     """
-    import yaml
-
     if axis not in ("linear", "rotary"):
         raise ParamError("axis", axis, "one of linear, rotary")
     p = Path(path) if path is not None else _find_controllers_yaml()
-    with open(p, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
-    params = params_from_mapping(_section(data, axis, p))
+    data = load_yaml(p)
+    with located(p, data, f"{axis}_controller.ros__parameters"):
+        params = params_from_mapping(_section(data, axis, p), strict=True)
     if overrides:
         params = with_updates(params, dict(overrides))
     from pneu_control.controller.references import make_reference

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = [
+    "MISSING",
     "ParamError",
     "ParamSpec",
     "param",
@@ -39,14 +40,30 @@ __all__ = [
 ]
 
 
+class _Missing:
+    """The value of a required key that is not there."""
+
+    def __repr__(self) -> str:
+        return "missing"
+
+
+MISSING = _Missing()
+
+
 class ParamError(ValueError):
-    """A parameter value was refused; the message names the key, value and range."""
+    """A parameter value was refused; the message names the key, value and range.
+
+    ``value`` :data:`MISSING`: the key is required and absent (``key: missing; required: ...``).
+    """
 
     def __init__(self, key: str, value: Any, allowed: str):
         self.key = key
         self.value = value
         self.allowed = allowed
-        super().__init__(f"{key}: {value!r} refused; allowed: {allowed}")
+        if value is MISSING:
+            super().__init__(f"{key}: missing; required: {allowed}")
+        else:
+            super().__init__(f"{key}: {value!r} refused; allowed: {allowed}")
 
 
 def param(
@@ -217,7 +234,12 @@ def from_dict(cls: type, data: Mapping[str, Any], *, strict: bool = True, prefix
                 f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
             )
             if strict or not has_default:
-                raise ParamError(key, None, "required; " + _allowed_text(f.metadata, float))
+                what = (
+                    "the parameter group " + ", ".join(x.name for x in dataclasses.fields(tp))
+                    if isinstance(tp, type) and dataclasses.is_dataclass(tp)
+                    else _allowed_text(f.metadata, tp if isinstance(tp, type) else float)
+                )
+                raise ParamError(key, MISSING, what)
             continue
         value = data[name]
         if isinstance(tp, type) and dataclasses.is_dataclass(tp):
