@@ -23,6 +23,7 @@ setup(
         "rosbags>=0.10",
         "zstandard>=0.22",
         "lz4>=4.0",
+        "filelock>=3.12",
     ],
     zip_safe=True,
     maintainer="pneu developers",

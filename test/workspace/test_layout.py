@@ -52,6 +52,7 @@ ROSDEP_PY = {
     "yaml": "python3-yaml",
     "numba": "python3-numba",
     "matplotlib": "python3-matplotlib",
+    "filelock": "python3-filelock",
 }
 # pip-only libraries (no rosdep key): must be in setup.py install_requires instead
 PIP_ONLY = {
@@ -184,7 +185,7 @@ def _role(pkg: str, f: Path) -> str:
 
 # role folders per package: the tree reads like the architecture (ARCHITECTURE.md)
 ROLES = {
-    "pneu_msgs_py": {"contract", "params", "bag", "nodes", "bench"},
+    "pneu_msgs_py": {"contract", "params", "bag", "lifecycle", "nodes", "bench"},
     "pneu_sim": {"physics", "cycle", "faults", "nodes", "cli", "bench"},
     "pneu_control": {
         "algorithms",

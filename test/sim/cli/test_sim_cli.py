@@ -78,6 +78,7 @@ def test_bad_plant_file_is_one_line_error(tmp_path):
     bad.write_text(yaml.safe_dump(tree), encoding="utf-8")
     args = parse(["--out", str(tmp_path / "o"), "--plant", str(bad), "--no-plot"])
     with pytest.raises(
-        ValueError, match=r"^linear\.V_1d: 0\.0 refused; allowed: \(0, 0\.001\] m\^3$"
+        ValueError,
+        match=r"plant\.yaml:\d+:\d+: linear\.V_1d: 0\.0 refused; allowed: \(0, 0\.001\] m\^3$",
     ):
         cli_sim.run(args)

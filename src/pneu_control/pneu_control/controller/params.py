@@ -98,7 +98,16 @@ class ReferenceParams:
 
     kind: str = param("sine", choices=REFERENCE_KINDS, desc="reference type")
     amplitude: float = param(20.0, unit="mm | rpm", desc="sine amplitude", source="paper")
-    frequency_hz: float = param(0.25, unit="Hz", desc="sine frequency", lo=0.0, source="paper")
+    frequency_hz: float = param(
+        0.25,
+        unit="Hz",
+        desc="sine frequency",
+        lo=0.0,
+        lo_open=True,
+        allowed="(0, 1/(2·sample_time_s)) Hz: above 0 and below the Nyquist frequency "
+        "(500 Hz at the paper's T = 1 ms)",
+        source="paper",
+    )
     offset: float = param(0.0, unit="mm | rpm", desc="sine offset; start of smooth_step and ramp")
     target: float = param(
         120.0 / math.pi, unit="mm | rpm", desc="smooth_step end value", source="paper Eq. 38"
@@ -116,8 +125,6 @@ class ReferenceParams:
     t0_s: float = param(0.0, unit="s", desc="start time; the reference holds before it", lo=0.0)
 
     def _check(self) -> None:
-        if self.kind == "sine" and self.frequency_hz <= 0.0:
-            raise ParamError("frequency_hz", self.frequency_hz, "(0, Nyquist) Hz for a sine")
         if self.kind == "smooth_step" and self.duration_s <= 0.0:
             raise ParamError("duration_s", self.duration_s, "(0, inf) s for a smooth_step")
         if self.kind == "waypoints" and not self.file:
@@ -207,7 +214,7 @@ class AxisControllerParams:
             raise ParamError(
                 "reference.frequency_hz",
                 self.reference.frequency_hz,
-                f"[0, {f_nyq:g}) Hz (below Nyquist 1/(2T) at T = {T:g} s)",
+                f"(0, {f_nyq:g}) Hz (below the Nyquist frequency 1/(2T) at T = {T:g} s)",
             )
         if self.td.h < T * (1.0 - 1e-9):
             raise ParamError("td.h", self.td.h, f"[{T:g}, inf) s (at least the sample time)")

@@ -12,6 +12,7 @@ from pneu_msgs_py.bag import BagWriter
 from pneu_control.controller.axis import STATE_FIELDS
 
 __all__ = [
+    "END_METADATA",
     "FAULTS_METADATA",
     "INTERVALS_METADATA",
     "RUN_METADATA",
@@ -24,6 +25,19 @@ RUN_METADATA = "pneu.run"  # metadata record holding the run's full config
 SAFETY_METADATA = "pneu.safety"  # supervisor on/off, its thresholds, allow_unsafe
 FAULTS_METADATA = "pneu.faults"  # the injected faults (written at the start)
 INTERVALS_METADATA = "pneu.fault_intervals"  # injected + safe intervals (written at the end)
+END_METADATA = "pneu.end"  # how the run ended: completed / interrupted (signal, time) / failed
+
+
+def end_metadata(end: dict[str, Any]) -> dict[str, str]:
+    """``pneu.end`` (last record of a finished bag): the run's end as strings.
+
+    A bag of a pneu run without it was cut short (process killed): ``pneu analyze``
+    says so, ``pneu recover`` rebuilds its index.
+    """
+    out = {}
+    for k, v in end.items():
+        out[k] = ("true" if v else "false") if isinstance(v, bool) else str(v)
+    return out
 
 
 def safety_metadata(echo: dict[str, Any]) -> dict[str, str]:

@@ -8,10 +8,17 @@ message indexes, and flushes it to the OS (a hard kill loses at most the
 chunk being buffered), and at :meth:`~McapContainer.finish` writes the
 summary (schemas, channels, statistics, chunk and metadata indexes, summary
 offsets) and the footer.
+
+The file is written as ``NAME.partial`` (created exclusively: a second
+writer, or one killed before it finished, is never overwritten) and renamed
+to ``NAME`` by :meth:`~McapContainer.close` after :meth:`~McapContainer.finish`
+(atomic): a ``.mcap`` is always a finished bag, a ``.mcap.partial`` one that
+was cut short (``pneu recover`` makes it whole).
 """
 
 from __future__ import annotations
 
+import os
 import zlib
 from collections.abc import Mapping
 from pathlib import Path
@@ -29,9 +36,10 @@ from pneu_msgs_py.bag.schemas import (
 from pneu_msgs_py.contract.qos import offered_qos_yaml
 from pneu_msgs_py.contract.topics import qos_for
 
-__all__ = ["COMPRESSIONS", "McapContainer"]
+__all__ = ["COMPRESSIONS", "PARTIAL_SUFFIX", "McapContainer"]
 
 COMPRESSIONS = ("zstd", "lz4", "none")
+PARTIAL_SUFFIX = ".partial"  # the same convention as pneu_msgs_py.lifecycle.outputs
 
 
 class McapContainer:
@@ -52,8 +60,16 @@ class McapContainer:
         else:
             self._compress = None
         self._comp_name = "" if compression == "none" else compression
+        self.partial_path = path.with_name(path.name + PARTIAL_SUFFIX)
+        self.finished = False
         try:
-            self._f = open(self.path, "wb")
+            self._f = open(self.partial_path, "xb")
+        except FileExistsError:
+            raise BagWriteError(
+                self.partial_path,
+                "exists: another writer is writing this bag, or one was killed before it "
+                "finished (pneu recover it, or remove it)",
+            ) from None
         except OSError as e:
             raise BagWriteError(self.path, f"cannot open for writing: {e.strerror}") from None
         self._pos = 0
@@ -239,6 +255,12 @@ class McapContainer:
         summary_crc = zlib.crc32(foot, summary_crc)
         self._f.write(foot + summary_crc.to_bytes(4, "little") + R.MAGIC)
         self._f.flush()
+        self.finished = True
 
     def close(self) -> None:
+        """Close the file; a finished one is renamed from ``NAME.partial`` to ``NAME``."""
+        if self._f.closed:
+            return
         self._f.close()
+        if self.finished:
+            os.replace(self.partial_path, self.path)

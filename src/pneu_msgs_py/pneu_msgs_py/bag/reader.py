@@ -95,6 +95,13 @@ def bag_files(path: str | os.PathLike) -> tuple[list[Path], list[str]]:
             raise EmptyBagError(p, "rosbag2 directory lists no files")
         return files, warn
     if not p.exists():
+        partial = p.with_name(p.name + ".partial")
+        if partial.is_file():
+            raise NotMcapError(
+                p,
+                f"no such file; {partial} is there (a recording that was cut short: "
+                f"pneu recover {partial} --out NEW.mcap)",
+            )
         raise NotMcapError(p, "no such file or directory")
     return [p], warn
 

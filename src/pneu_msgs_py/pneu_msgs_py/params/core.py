@@ -78,11 +78,14 @@ def param(
     choices: tuple[str, ...] | None = None,
     source: str = "",
     read_only: bool = False,
+    allowed: str = "",
 ) -> Any:
     """A dataclass field with pneu metadata.
 
     ``lo``/``hi`` are inclusive bounds unless ``lo_open``/``hi_open``.
     ``read_only`` marks values whose change needs a restart (ROS descriptor).
+    ``allowed`` replaces the printed range where the true one depends on another
+    field (checked by the group's ``_check``), so a refusal never prints a wrong range.
     """
     meta = {
         "pneu": True,
@@ -95,6 +98,7 @@ def param(
         "choices": choices,
         "source": source,
         "read_only": read_only,
+        "allowed": allowed,
     }
     if dataclasses.is_dataclass(default) and not isinstance(default, type):
         return dataclasses.field(default_factory=lambda d=default: d, metadata=meta)
@@ -119,14 +123,23 @@ class ParamSpec:
 
 
 def _allowed_text(meta: Mapping[str, Any], typ: type) -> str:
+    if meta.get("allowed"):
+        return meta["allowed"]
     if meta.get("choices"):
         return "one of " + ", ".join(meta["choices"])
     lo, hi = meta.get("lo"), meta.get("hi")
     unit = f" {meta['unit']}" if meta.get("unit") else ""
+    if typ is bool:
+        return "true or false"
+    if typ is str:
+        return "a string"
+    if typing.get_origin(typ) is tuple:
+        return f"a list of finite numbers{unit}"
     if lo is None and hi is None:
         return f"any finite {typ.__name__}{unit}"
-    left = "(" if meta.get("lo_open") else "["
-    right = ")" if meta.get("hi_open") else "]"
+    # values are finite: an open end is never included
+    left = "(" if meta.get("lo_open") or lo is None else "["
+    right = ")" if meta.get("hi_open") or hi is None else "]"
     lo_s = "-inf" if lo is None else f"{lo:g}"
     hi_s = "inf" if hi is None else f"{hi:g}"
     return f"{left}{lo_s}, {hi_s}{right}{unit}"
