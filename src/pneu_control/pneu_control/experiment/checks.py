@@ -42,37 +42,51 @@ def reference_extremes(params: Any, axis: str, duration_s: float) -> tuple[float
     return min(lo, r_end) * scale, max(hi, r_end) * scale
 
 
-def check_references(spec: Any) -> None:
-    """Refuse a linear reference outside the soft limits, a rotary one above the overspeed limit."""
+def check_references(spec: Any, field: str | None = None) -> None:
+    """Refuse a linear reference outside the soft limits, a rotary one above the overspeed limit.
+
+    Without a supervisor (``spec.safety`` None) the limits are the physical ones: the
+    end stops and the rated speed. ``field`` names the option the reference came from
+    (default ``<axis>.reference``).
+    """
     from pneu_driver.safety import SafetyParams
 
     safety = spec.safety if spec.safety is not None else SafetyParams()
+    supervised = spec.safety is not None
     for axis in spec.axes:
         params = spec.controllers[axis]
+        name = field or f"{axis}.reference"
+        if field and len(spec.axes) > 1:
+            name = f"{field} ({axis})"
         lo, hi = reference_extremes(params, axis, spec.duration_s)
         if not (math.isfinite(lo) and math.isfinite(hi)):
-            raise ParamError(f"{axis}.reference", _label(params), "a reference with finite values")
+            raise ParamError(name, _label(params), "a reference with finite values")
         if axis == "linear":
-            limit = (safety.stroke_m / 2.0 - safety.stroke_margin_m) * MM_PER_M
+            margin = safety.stroke_margin_m if supervised else 0.0
+            limit = (safety.stroke_m / 2.0 - margin) * MM_PER_M
             bad = hi if hi > limit else lo if lo < -limit else None
             if bad is not None:
+                what = (
+                    f"the soft limits [{-limit:g}, {limit:g}] mm (stroke "
+                    f"{safety.stroke_m * MM_PER_M:g} mm less {margin * MM_PER_M:g} mm per end)"
+                    if supervised
+                    else f"the end stops [{-limit:g}, {limit:g}] mm"
+                )
                 raise ParamError(
-                    f"{axis}.reference",
+                    name,
                     _label(params),
-                    f"a position reference inside the soft limits [{-limit:g}, {limit:g}] mm "
-                    f"(stroke {safety.stroke_m * MM_PER_M:g} mm less "
-                    f"{safety.stroke_margin_m * MM_PER_M:g} mm per end; this one reaches "
-                    f"{bad:.4g} mm)",
+                    f"a position reference inside {what}; this one reaches {bad:.4g} mm",
                 )
         else:
-            limit = safety.max_speed_rpm
+            limit = safety.max_speed_rpm if supervised else safety.rated_speed_rpm
             peak = max(abs(lo), abs(hi))
             if peak > limit:
+                what = "the overspeed limit max_speed_rpm" if supervised else "the rated speed"
                 raise ParamError(
-                    f"{axis}.reference",
+                    name,
                     _label(params),
-                    f"a speed reference within ±{limit:g} rpm (the overspeed limit "
-                    f"max_speed_rpm; this one reaches {peak:.5g} rpm)",
+                    f"a speed reference within ±{limit:g} rpm ({what}); this one reaches "
+                    f"{peak:.5g} rpm",
                 )
 
 
@@ -106,7 +120,7 @@ def check_faults(faults: tuple[Any, ...], axes: tuple[str, ...], duration_s: flo
         if not set(acts_on) & set(axes):
             where = ", ".join(f.axes(ALL_AXES)) or "an inactive controller"
             raise ParamError(
-                f"--fault {f.label}",
-                f.name,
+                "--fault",
+                f.label,
                 f"a fault on an active axis ({', '.join(axes)}); this one acts on {where}",
             )

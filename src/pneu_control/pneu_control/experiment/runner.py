@@ -98,9 +98,8 @@ class RunResult:
     @property
     def rtf(self) -> float:
         """Simulated seconds per wall-clock second."""
-        return (
-            float(self.t[-1] + self.t[1] - self.t[0]) / self.wall_s if self.wall_s > 0 else math.inf
-        )
+        simulated = len(self.t) * self.spec.plant.sim.T
+        return simulated / self.wall_s if self.wall_s > 0 else math.inf
 
     def metrics_dict(self) -> dict[str, Any]:
         return {axis: m.to_dict() for axis, m in self.metrics.items()}

@@ -168,7 +168,7 @@ def build_spec(
         safety=safety_params,
         include_faults=include_faults,
     )
-    check_references(spec)
+    check_references(spec, "--reference" if reference else None)
     return spec
 
 
