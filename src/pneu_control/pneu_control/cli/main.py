@@ -32,6 +32,7 @@ SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("plot", "pneu_control.cli.plot"),
     ("compare", "pneu_control.cli.compare"),
     ("replay", "pneu_control.cli.replay"),
+    ("recover", "pneu_control.cli.recover"),
     ("tune", "pneu_control.cli.tune"),
     ("bench", "pneu_control.cli.bench"),
 )

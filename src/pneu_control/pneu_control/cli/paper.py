@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 from pathlib import Path
 
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.outputs import OutputDir
+from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.paths import config_dir
 
 from pneu_control.analysis.plots import Series, plot_runs
+from pneu_control.controller.params import load_controller_params
 from pneu_control.experiment import paper, session
 from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, Experiment, experiment_by_id
 
@@ -20,7 +25,17 @@ HELP = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="new or empty directory (or --overwrite): table, figures, one directory per run",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of a previous pneu paper in DIR (other files are left alone)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the runs in the table (and bags)")
     p.add_argument(
         "--seeds",
@@ -62,15 +77,41 @@ def _series(result, exp: Experiment, label: str, m) -> Series:
     )
 
 
+MAX_SEEDS = 100
+
+
+def _artefacts(experiments) -> tuple[str, ...]:
+    names = ["paper_table.json", "paper_table.md"]
+    names += [f"{exp.id}__{g}.png" for exp in experiments for g in paper.PAPER_GAIN_SETS]
+    return tuple(names)
+
+
 def run(args: argparse.Namespace) -> int:
     from pneu_sim.physics.plant_file import load_plant
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    plant = load_plant(args.plant)
-    results: dict[tuple[str, str], object] = {}
-
+    # everything checked before anything is written
+    if not 1 <= args.seeds <= MAX_SEEDS:
+        raise ParamError("--seeds", args.seeds, f"an integer in [1, {MAX_SEEDS}]")
+    session.check_seed(args.seed)
+    session.check_seed(args.seed + args.seeds - 1, "--seed + --seeds - 1")
+    experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
     cfg = Path(args.config_dir) if args.config_dir else config_dir()
+    if not cfg.is_dir():
+        raise ParamError("--config-dir", str(cfg), "a directory holding controllers*.yaml")
+    plant = load_plant(args.plant)
+    for gains in paper.GAIN_SETS.values():  # every controllers file, strictly, before any run
+        for axis in ("linear", "rotary"):
+            load_controller_params(axis, cfg / gains)
+    claim = OutputDir(
+        args.out, _artefacts(experiments), overwrite=args.overwrite, inputs=[args.plant]
+    ).check()
+    with claim:
+        return _run(args, claim, plant, cfg, experiments)
+
+
+def _run(args, claim: OutputDir, plant, cfg: Path, experiments) -> int:
+    out = claim.path
+    results: dict[tuple[str, str], object] = {}
 
     def runner(exp: Experiment, controller: str, gains: str, run_dir: Path):
         spec = session.build_spec(
@@ -84,7 +125,9 @@ def run(args: argparse.Namespace) -> int:
             name=f"{exp.id}/{controller}/{gains}",
         )
         spec = _with_window(spec, exp)
-        result = session.execute(spec, run_dir, bag=True)
+        result = session.execute(spec, run_dir, bag=True, overwrite=args.overwrite)
+        if result.interrupted:  # that run is finished (interrupted: true); stop here
+            raise signals.Interrupted(signals.pending() or signal.SIGINT)
         m = session.metrics_from_bag(run_dir / "run.mcap", exp.axis)
         results[(exp.id, controller, gains)] = (result, m)
         return result, m
@@ -101,13 +144,13 @@ def run(args: argparse.Namespace) -> int:
             controllers_file=cfg / paper.GAIN_SETS[gains],
             plant=plant,
         )
-        return run_spec(_with_window(spec, exp)).metrics[exp.axis]
+        result = run_spec(_with_window(spec, exp))
+        if result.interrupted:
+            raise signals.Interrupted(signals.pending() or signal.SIGINT)
+        return result.metrics[exp.axis]
 
-    if args.seeds < 1:
-        raise ValueError(f"--seeds: {args.seeds} refused; allowed: an integer >= 1")
     t0 = time.perf_counter()
     print(f"pneu paper: experiments of the paper on the twin (seed {args.seed})")
-    experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
     rows = paper.run_paper(
         out,
         seed=args.seed,
@@ -116,7 +159,8 @@ def run(args: argparse.Namespace) -> int:
         seed_runner=seed_runner,
         seeds=args.seeds,
     )
-    paper.write_table(rows, out, extra={"seed": args.seed, "seeds": args.seeds})
+    with signals.deferred():
+        paper.write_table(rows, out, extra={"seed": args.seed, "seeds": args.seeds})
     if not args.no_plots:
         for exp in experiments:
             for gains in paper.PAPER_GAIN_SETS:
@@ -129,7 +173,10 @@ def run(args: argparse.Namespace) -> int:
                     _series(results[k][0], exp, f"{k[1]} ({k[2]} gains)", results[k][1])
                     for k in keys
                 ]
-                plot_runs(series, f"{exp.title}: {gains} gains", out / f"{exp.id}__{gains}.png")
+                name = f"{exp.id}__{gains}.png"
+                with signals.deferred():
+                    plot_runs(series, f"{exp.title}: {gains} gains", claim.partial(name), fmt="png")
+                    claim.publish(name)
     print()
     print(paper.render_markdown(rows))
     print(

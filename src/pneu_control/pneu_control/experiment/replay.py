@@ -135,11 +135,22 @@ def replay(
             "open_loop": "true",
         }
     }
-    with BagWriter(out, metadata=meta, controller_state_fields=STATE_FIELDS) as w:
-        for s in samples:
-            w.write_sample(s)
-            for axis, c in ctrls.items():
-                u = c.update(s)
-                w.write_command(axis, s.stamp_ns, u)
-                w.write_controller_state(axis, s.stamp_ns, c.state_values(), c.algorithm)
+    from pneu_msgs_py.lifecycle import signals
+
+    w = BagWriter(out, metadata=meta, controller_state_fields=STATE_FIELDS)
+    sig = signals.STATE
+    try:
+        with signals.deferred():  # a signal stops at the next sample; no half-written bag
+            for s in samples:
+                if sig.pending is not None:
+                    raise signals.Interrupted(sig.pending)
+                w.write_sample(s)
+                for axis, c in ctrls.items():
+                    u = c.update(s)
+                    w.write_command(axis, s.stamp_ns, u)
+                    w.write_controller_state(axis, s.stamp_ns, c.state_values(), c.algorithm)
+    except BaseException:
+        w.discard()  # an offline product: remade by running the command again
+        raise
+    w.close()
     return used

@@ -308,7 +308,9 @@ def run(
             s = cycle.advance()  # tick k -> k+1 under u_{k-1}
             if progress is not None and k % report_every == 0:
                 progress(k * period)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
+        if isinstance(err, signals.Interrupted) and sig.defer == 0:
+            raise  # the caller did not defer signals (tune, paper's extra seeds): it stops too
         interrupted = True
     wall = time.perf_counter() - t_wall
 

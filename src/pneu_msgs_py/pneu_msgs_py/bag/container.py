@@ -75,6 +75,7 @@ class McapContainer:
         self._pos = 0
         self._crc = 0
         self.schemas: dict[str, tuple[int, bytes]] = {}
+        self._schema_text: dict[str, bytes] = {}
         self.channels: dict[str, Channel] = {}
         self._chunk_indexes: list[bytes] = []
         self._metadata_indexes: list[bytes] = []
@@ -88,7 +89,16 @@ class McapContainer:
         self._crc = zlib.crc32(data, self._crc)
         self._pos += len(data)
 
-    def channel(self, topic: str, ros_type: str) -> Channel:
+    def channel(
+        self,
+        topic: str,
+        ros_type: str,
+        *,
+        schema_text: bytes | None = None,
+        channel_metadata: Mapping[str, str] | None = None,
+    ) -> Channel:
+        """The channel of ``topic`` (created on first use). ``schema_text`` and
+        ``channel_metadata`` carry a foreign bag's own definition and QoS (pneu recover)."""
         ch = self.channels.get(topic)
         if ch is not None:
             if ch.ros_type != ros_type:
@@ -98,22 +108,24 @@ class McapContainer:
             return ch
         if ros_type not in self.schemas:
             sid = len(self.schemas) + 1
-            text = MSG_DEFINITIONS.get(ros_type)
-            if text is None:
-                text = ""  # foreign type via write_serialized: definition unknown here
-            self.schemas[ros_type] = (
-                sid,
-                R.schema(sid, ros_type, SCHEMA_ENCODING, text.encode("utf-8")),
-            )
+            if schema_text is None:
+                # foreign type via write_serialized: definition unknown here
+                schema_text = MSG_DEFINITIONS.get(ros_type, "").encode("utf-8")
+            self._schema_text[ros_type] = schema_text
+            self.schemas[ros_type] = (sid, R.schema(sid, ros_type, SCHEMA_ENCODING, schema_text))
         sid = self.schemas[ros_type][0]
         cid = len(self.channels) + 1
         qos = qos_for(topic, self.qos_mode)
         ch = Channel(cid, topic, ros_type, sid, qos)
         # the two channel metadata keys rosbag2 (Jazzy) writes
-        meta = {
-            "offered_qos_profiles": offered_qos_yaml([qos]),
-            "topic_type_hash": TYPE_HASHES.get(ros_type, ""),
-        }
+        meta = (
+            dict(channel_metadata)
+            if channel_metadata is not None
+            else {
+                "offered_qos_profiles": offered_qos_yaml([qos]),
+                "topic_type_hash": TYPE_HASHES.get(ros_type, ""),
+            }
+        )
         ch.record = R.channel(cid, sid, topic, MESSAGE_ENCODING, meta)
         self.channels[topic] = ch
         return ch
@@ -221,8 +233,8 @@ class McapContainer:
 
         schema_recs = []
         for ros_type, (sid, _) in sorted(self.schemas.items(), key=lambda kv: kv[1][0]):
-            text = MSG_DEFINITIONS.get(ros_type, "")
-            schema_recs.append(R.schema(sid, ros_type, SCHEMA_ENCODING, text.encode("utf-8")))
+            text = self._schema_text[ros_type]
+            schema_recs.append(R.schema(sid, ros_type, SCHEMA_ENCODING, text))
         group(R.Op.SCHEMA, schema_recs)
         group(R.Op.CHANNEL, [ch.record for ch in self.channels.values()])
         n_msgs = sum(ch.count for ch in self.channels.values())
