@@ -87,8 +87,12 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run one subcommand; return its exit code (README: 0, 1, 2, 3, 129, 130, 143)."""
+def main(argv: list[str] | None = None, *, restore_signals: bool = True) -> int:
+    """Run one subcommand; return its exit code (README: 0, 1, 2, 3, 129, 130, 143).
+
+    ``restore_signals`` False (the ``pneu`` process itself): after the command, signals
+    stay recorded-only, so one arriving while the interpreter shuts down changes nothing.
+    """
     restore = signals.install()  # first: a signal at any moment from here on ends cleanly
     try:
         return _main(argv)
@@ -96,7 +100,20 @@ def main(argv: list[str] | None = None) -> int:
         print(f"pneu: interrupted by {signals.signal_name(err.signum)}", file=sys.stderr)
         return exits.interrupted_code(err.signum)
     finally:
-        restore()
+        if restore_signals:
+            restore()
+        else:
+            signals.STATE.defer += 1  # from here to the exit: record, never raise
+
+
+def cli() -> NoReturn:
+    """The ``pneu`` console script."""
+    code = main(restore_signals=False)
+    # the command is done and its files are finished: a signal from here to the exit is
+    # ignored (Python's shutdown would reset a Python handler to the default, which kills)
+    for s in signals.SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    sys.exit(code)
 
 
 def _main(argv: list[str] | None) -> int:
@@ -159,4 +176,4 @@ def _classify(err: Exception) -> tuple[int, str]:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    cli()

@@ -21,7 +21,7 @@ import numpy as np
 
 from pneu_msgs_py import __version__
 from pneu_msgs_py.bag import mcap_records as R
-from pneu_msgs_py.bag.chunks import Batch
+from pneu_msgs_py.bag.chunks import Batch, merge_same_channel
 from pneu_msgs_py.bag.container import McapContainer
 from pneu_msgs_py.bag.errors import EmptyBagError
 from pneu_msgs_py.bag.mcap_file import McapFile, walk_offsets
@@ -60,30 +60,53 @@ class RecoveryReport:
         )
 
 
-def _records(chunk) -> list[tuple[int, int, int, int, bytes]]:
-    """(channel id, sequence, log time, publish time, data) of every message record of a chunk."""
-    data = chunk.data
-    offsets = chunk.offsets if chunk.offsets is not None else walk_offsets(data)
+def _channel_rows(data: bytes, offs: np.ndarray) -> list[np.ndarray]:
+    """The message records at ``offs`` as ``(n, 31 + size)`` byte rows, one array per size."""
     buf = np.frombuffer(data, dtype=np.uint8)
+    offs = offs[(offs >= 0) & (offs + _HDR <= len(buf))]
+    if not len(offs):
+        return []
+    hv = buf[offs[:, None] + np.arange(_HDR)].view(R.MESSAGE_RECORD_DTYPE)[:, 0]
+    sizes = hv["length"].astype(np.int64) - 22
+    ok = (hv["op"] == R.Op.MESSAGE) & (sizes >= 0) & (offs + _HDR + sizes <= len(buf))
     out = []
-    for offs in offsets.values():
-        for o in offs.tolist():
-            if o < 0 or o + _HDR > len(buf):
-                continue
-            rec = buf[o : o + _HDR].view(R.MESSAGE_RECORD_DTYPE)[0]
-            size = int(rec["length"]) - 22
-            if rec["op"] != R.Op.MESSAGE or size < 0 or o + _HDR + size > len(buf):
-                continue
-            out.append(
-                (
-                    int(rec["channel_id"]),
-                    int(rec["sequence"]),
-                    int(rec["log_time"]),
-                    int(rec["publish_time"]),
-                    data[o + _HDR : o + _HDR + size],
-                )
-            )
+    for size in np.unique(sizes[ok]).tolist():
+        o = offs[ok & (sizes == size)]
+        out.append(buf[o[:, None] + np.arange(_HDR + size)])
     return out
+
+
+def _chunk_batches(chunk, f: McapFile, container: McapContainer, rep: RecoveryReport):
+    """The chunk's messages as batches of the new file's channels (records copied as they are)."""
+    offsets = chunk.offsets if chunk.offsets is not None else walk_offsets(chunk.data)
+    if any(cid not in f.channels for cid in offsets):
+        f.definitions_in(chunk.data)
+    batches: list[Batch] = []
+    read: dict[int, int] = {}
+    for cid, offs in offsets.items():
+        info = f.channels.get(cid)
+        if info is None:
+            rep.lost_unknown = True  # messages of a channel whose definition was lost
+            continue
+        sch = f.schemas.get(info.schema_id)
+        ch = container.channel(
+            info.topic,
+            sch.name if sch else "unknown/msg/Unknown",
+            schema_text=sch.data if sch else b"",
+            channel_metadata=info.metadata,
+        )
+        parts = []
+        for rows in _channel_rows(chunk.data, offs):
+            rows[:, 9:11] = np.frombuffer(np.uint16(ch.id).tobytes(), dtype=np.uint8)
+            lt = rows[:, 15:23].copy().view("<i8")[:, 0]  # log_time (MESSAGE_RECORD_DTYPE)
+            parts.append(Batch(ch, lt, rows=rows))
+            ch.count += len(rows)
+            read[cid] = read.get(cid, 0) + len(rows)
+        if len(parts) > 1:  # one channel in several record sizes: one time-ordered batch
+            parts = [merge_same_channel(parts)]
+        batches.extend(parts)
+        rep.topics[info.topic] = rep.topics.get(info.topic, 0) + read.get(cid, 0)
+    return batches, read
 
 
 def recover(source: str | os.PathLike, out: str | os.PathLike) -> RecoveryReport:
@@ -111,34 +134,11 @@ def recover(source: str | os.PathLike, out: str | os.PathLike) -> RecoveryReport
                             rep.lost += sum(chunk.lost.values())
                         rep.warnings.append(f"{path}: {chunk.problem}: chunk skipped")
                         continue
-                    recs = _records(chunk)
-                    if any(cid not in f.channels for cid, *_ in recs):
-                        f.definitions_in(chunk.data)
-                    batches: dict[int, tuple[object, list[int], list[bytes]]] = {}
-                    for cid, seq, lt, pt, data in recs:
-                        ch_info = f.channels.get(cid)
-                        if ch_info is None:
-                            rep.lost_unknown = True
-                            continue
-                        sch = f.schemas.get(ch_info.schema_id)
-                        name = sch.name if sch else "unknown/msg/Unknown"
-                        ch = container.channel(
-                            ch_info.topic,
-                            name,
-                            schema_text=sch.data if sch else b"",
-                            channel_metadata=ch_info.metadata,
-                        )
-                        b = batches.setdefault(ch.id, (ch, [], []))
-                        b[1].append(lt)
-                        b[2].append(R.message(ch.id, seq & 0xFFFFFFFF, lt, pt, data))
-                        read[cid] = read.get(cid, 0) + 1
-                    out_batches = []
-                    for ch, lts, blobs in batches.values():
-                        ch.count += len(blobs)
-                        rep.topics[ch.topic] = rep.topics.get(ch.topic, 0) + len(blobs)
-                        out_batches.append(Batch(ch, np.array(lts, dtype=np.int64), records=blobs))
-                    if out_batches:
-                        container.write_chunk(out_batches)
+                    batches, got = _chunk_batches(chunk, f, container, rep)
+                    for cid, n in got.items():
+                        read[cid] = read.get(cid, 0) + n
+                    if batches:
+                        container.write_chunk(batches)
                 for name, md in f.metadata.items():
                     metadata.setdefault(name, {}).update(md)
                 rep.warnings.extend(f"{path}: {w}" for w in f.warnings)
