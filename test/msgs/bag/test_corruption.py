@@ -30,9 +30,7 @@ def bag(tmp_path_factory) -> Path:
     p = tmp_path_factory.mktemp("bags") / "run.mcap"
     with BagWriter(p, chunk_size=24 * 1024, metadata={"pneu.run": {"seed": "3"}}) as w:
         for k in range(N):
-            w.write_sample(
-                SensorSample(k, k * 1_000_000, 1e5 + k, 2e5, 3e5, 1e-5 * k, 0.0, 0.0, k)
-            )
+            w.write_sample(SensorSample(k, k * 1_000_000, 1e5 + k, 2e5, 3e5, 1e-5 * k, 0.0, 0.0, k))
             w.write_command("linear", k * 1_000_000, 5.0 + 1e-4 * k)
     return p
 

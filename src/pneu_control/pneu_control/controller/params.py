@@ -26,7 +26,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pneu_msgs_py.params.core import ParamError, flatten, from_dict, param, with_updates
+from pneu_msgs_py.params.core import (
+    MISSING,
+    ParamError,
+    flatten,
+    from_dict,
+    param,
+    with_updates,
+)
 from pneu_msgs_py.params.yaml_file import load_yaml, located
 
 from pneu_control.algorithms import EsoSmcParams, EsoSmcPlusParams, LadrcParams, PidParams
@@ -268,10 +275,10 @@ def _find_controllers_yaml() -> Path:
 def _section(data: Any, axis: str, path: Path) -> Mapping[str, Any]:
     key = f"{axis}_controller"
     if not isinstance(data, Mapping) or key not in data:
-        raise ParamError(key, None, f"a top-level '{key}:' section in {path}")
+        raise ParamError(key, MISSING, f"a top-level '{key}:' section")
     node = data[key]
     if not isinstance(node, Mapping) or "ros__parameters" not in node:
-        raise ParamError(f"{key}.ros__parameters", None, f"a 'ros__parameters:' mapping in {path}")
+        raise ParamError(f"{key}.ros__parameters", MISSING, "a 'ros__parameters:' mapping")
     params = node["ros__parameters"]
     if not isinstance(params, Mapping):
         raise ParamError(f"{key}.ros__parameters", params, "a mapping")

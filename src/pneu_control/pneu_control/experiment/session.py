@@ -140,9 +140,10 @@ def build_spec(
         if controller:
             overrides["algorithm"] = controller
         overrides.update(per_axis[axis])
+        load_controller_params(axis, controllers_file)  # the file's own errors, located in it
         try:
             params = load_controller_params(axis, controllers_file, overrides)
-        except ParamError as err:
+        except ParamError as err:  # an override's: named with its axis
             raise ParamError(f"{axis}.{err.key}", err.value, err.allowed) from None
         controllers[axis] = params
         windows[axis] = window_for(axis, params.reference, window_start_s)
