@@ -5,7 +5,7 @@ typo'd key, a key deleted, a value of the wrong type or out of range) and
 loaded through the command line where it has an option (``--plant``,
 ``--controllers``, ``--safety``, ``PNEU_CONFIG_DIR``, ``paper --config-dir``,
 ``tune --controllers``), else through its loader: one line, ``file:line:col``,
-the key as written, exit code 2, nothing written.
+the key as written (after the option the file came from), exit code 2, nothing written.
 """
 
 from __future__ import annotations
@@ -82,7 +82,8 @@ def load_via_cli(name: str, path: Path, tmp: Path, capsys) -> str:
 def test_every_config_file_refuses_the_same_mistakes_the_same_way(name, kind, tmp_path, capsys):
     path = edited(name, kind, tmp_path)
     msg = load_via_cli(name, path, tmp_path, capsys)
-    pattern = EDITS[kind][1].format(f=re.escape(str(path)))
+    option = FILES[name][0]
+    pattern = (f"{option}: " if option else "") + EDITS[kind][1].format(f=re.escape(str(path)))
     m = re.match(pattern, msg)
     assert m, msg
     assert "\n" not in msg

@@ -12,6 +12,7 @@ from pneu_msgs_py.lifecycle import signals
 from pneu_msgs_py.lifecycle.outputs import OutputDir
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.paths import config_dir
+from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.analysis.plots import Series, plot_runs
 from pneu_control.controller.params import load_controller_params
@@ -98,10 +99,12 @@ def run(args: argparse.Namespace) -> int:
     cfg = Path(args.config_dir) if args.config_dir else config_dir()
     if not cfg.is_dir():
         raise ParamError("--config-dir", str(cfg), "a directory holding controllers*.yaml")
-    plant = load_plant(args.plant)
+    with from_option("--plant" if args.plant else None):
+        plant = load_plant(args.plant)
     for gains in paper.GAIN_SETS.values():  # every controllers file, strictly, before any run
         for axis in ("linear", "rotary"):
-            load_controller_params(axis, cfg / gains)
+            with from_option("--config-dir" if args.config_dir else None):
+                load_controller_params(axis, cfg / gains)
     claim = OutputDir(
         args.out, _artefacts(experiments), overwrite=args.overwrite, inputs=[args.plant]
     ).check()

@@ -6,8 +6,10 @@ import argparse
 import sys
 
 from pneu_msgs_py.lifecycle.outputs import OutputFile
+from pneu_msgs_py.params.core import ParamError
 
 from pneu_control.analysis.run_analysis import analyze
+from pneu_control.controller.params import ALGORITHMS
 from pneu_control.experiment.replay import OPEN_LOOP_NOTE, replay
 from pneu_control.experiment.session import parse_sets
 
@@ -40,6 +42,8 @@ def run(args: argparse.Namespace) -> int:
     if args.axis:
         axes = ["linear", "rotary"] if args.axis == "both" else [args.axis]
     sets = list(args.set)
+    if args.controller is not None and args.controller not in ALGORITHMS:
+        raise ParamError("--controller", args.controller, "one of " + ", ".join(ALGORITHMS))
     if args.controller:
         sets.insert(0, f"algorithm={args.controller}")
     probe_axes = tuple(axes or ("linear", "rotary"))

@@ -13,6 +13,7 @@ import yaml
 from pneu_msgs_py.lifecycle import signals
 from pneu_msgs_py.lifecycle.outputs import OutputFile
 from pneu_msgs_py.params.core import to_dict
+from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.controller.params import load_controller_params
 from pneu_control.experiment import session, tuning
@@ -99,10 +100,12 @@ def run(args: argparse.Namespace) -> int:
         inputs=[base, args.plant or config_file("plant.yaml")],
         suffixes=(".yaml", ".yml"),
     ).check()
-    plant = load_plant(args.plant)
+    with from_option("--plant" if args.plant else None):
+        plant = load_plant(args.plant)
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
     for axis in axes:  # the base file is read (strictly) before the long search
-        load_controller_params(axis, args.controllers)
+        with from_option("--controllers" if args.controllers else None):
+            load_controller_params(axis, args.controllers)
     algorithms = tuple(args.algorithm) or ALGORITHMS
     results: dict[str, dict[str, Any]] = {}
     notes: list[str] = []

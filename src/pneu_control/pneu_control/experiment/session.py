@@ -17,6 +17,7 @@ from pneu_msgs_py.lifecycle.duration import check_duration
 from pneu_msgs_py.lifecycle.outputs import OutputDir
 from pneu_msgs_py.params.core import ParamError, to_dict
 from pneu_msgs_py.params.spec import parse_spec, parse_value
+from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.analysis.metrics import WindowSpec
 from pneu_control.controller.params import load_controller_params
@@ -122,15 +123,19 @@ def build_spec(
     from pneu_sim.faults.injection import parse_faults
     from pneu_sim.physics.plant_file import load_plant
 
+    from pneu_control.controller.params import ALGORITHMS
     from pneu_control.experiment.checks import check_faults, check_references
 
     duration_s = check_duration(duration_s, "--duration")
+    if controller is not None and controller not in ALGORITHMS:
+        raise ParamError("--controller", controller, "one of " + ", ".join(ALGORITHMS))
     seed = check_seed(seed)
     if window_start_s is not None and not (
         isinstance(window_start_s, (int, float)) and 0.0 <= window_start_s < duration_s
     ):
         raise ParamError("--window-start", window_start_s, f"[0, {duration_s:g}) s: inside the run")
-    plant_params = plant if plant is not None else load_plant(plant_file)
+    with from_option("--plant" if plant_file else None):
+        plant_params = plant if plant is not None else load_plant(plant_file)
     per_axis = parse_sets(sets, axes)
     ref = reference if isinstance(reference, dict) else parse_reference(reference)
     controllers: dict[str, Any] = {}
@@ -140,7 +145,8 @@ def build_spec(
         if controller:
             overrides["algorithm"] = controller
         overrides.update(per_axis[axis])
-        load_controller_params(axis, controllers_file)  # the file's own errors, located in it
+        with from_option("--controllers" if controllers_file else None):
+            load_controller_params(axis, controllers_file)  # the file's errors, located in it
         try:
             params = load_controller_params(axis, controllers_file, overrides)
         except ParamError as err:  # an override's: named with its axis
@@ -151,7 +157,8 @@ def build_spec(
     if safety is True:
         from pneu_driver.safety import load_safety_params
 
-        safety_params = load_safety_params(safety_file)
+        with from_option("--safety" if safety_file else None):
+            safety_params = load_safety_params(safety_file)
     elif safety is False or safety is None:
         safety_params = None
     else:

@@ -25,7 +25,7 @@ import yaml
 
 from pneu_msgs_py.params.core import ParamError
 
-__all__ = ["ConfigFileError", "MarkedDict", "load_yaml", "located"]
+__all__ = ["ConfigFileError", "MarkedDict", "from_option", "load_yaml", "located"]
 
 
 class ConfigFileError(ParamError):
@@ -40,6 +40,26 @@ class ConfigFileError(ParamError):
 
     def __str__(self) -> str:
         return self.args[0]
+
+
+@contextlib.contextmanager
+def from_option(option: str | None) -> Iterator[None]:
+    """Name the command-line option a file came from in its read/parse errors
+    (``--plant: run.mcap: not UTF-8 text``); ``None``: the default file, named by its path."""
+    try:
+        yield
+    except ConfigFileError as err:
+        if option is None:
+            raise
+        new = ConfigFileError(err.path, err.problem, err.line, err.col)
+        new.args = (f"{option}: {err}",)
+        raise new from None
+    except ParamError as err:  # a value refused, located in the file
+        if option is None:
+            raise
+        new = type(err).__new__(type(err))
+        ParamError.__init__(new, f"{option}: {err.key}", err.value, err.allowed)
+        raise new from None
 
 
 class MarkedDict(dict):

@@ -20,6 +20,7 @@ from pneu_msgs_py.lifecycle import exits, signals
 from pneu_msgs_py.lifecycle.duration import check_duration
 from pneu_msgs_py.lifecycle.outputs import OutputDir
 from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.yaml_file import from_option
 
 NAME = "sim"
 HELP = "run the plant twin open loop at constant valve voltages; write CSV + PNG"
@@ -158,7 +159,8 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.seed <= 2**32 - 1:
         raise ParamError("--seed", args.seed, f"an integer in [0, {2**32 - 1}]")
     claim = OutputDir(args.out, ARTEFACTS, overwrite=args.overwrite, inputs=[args.plant]).check()
-    params = load_plant(args.plant)  # ParamError -> one line, exit 2
+    with from_option("--plant" if args.plant else None):
+        params = load_plant(args.plant)  # ParamError -> one line, exit 2
 
     def progress(i: int, n: int) -> None:
         print(f"pneu sim: {i}/{n} steps ({100.0 * i / n:.0f} %)", file=sys.stderr, flush=True)
