@@ -49,16 +49,25 @@ def run(args: argparse.Namespace) -> int:
                     "rmse": m.rmse,
                     "unit": m.unit,
                     "window_s": m.window_s,
+                    # compare has no window option: the hint points at analyze's
+                    "why": m.why_empty().replace(
+                        "pass --window-start", "pneu analyze --window-start"
+                    ),
                 }
             )
         series.extend(series_of(res, label_prefix=f"{Path(path).parent.name}/{Path(path).name}: "))
     lines = ["| run | axis | algorithm | e_max | RMSE | window (s) |", "|---|---|---|---|---|---|"]
+    notes = []
     for r in rows:
+        if r["why"]:  # no figure: say why once, below the table
+            notes.append(f"- {r['run']} {r['axis']}: {r['why']}")
+            lines.append(f"| {r['run']} | {r['axis']} | {r['algorithm']} | — | — | — |")
+            continue
         lines.append(
             f"| {r['run']} | {r['axis']} | {r['algorithm']} | {r['e_max']:.4f} {r['unit']} | "
             f"{r['rmse']:.4f} {r['unit']} | {r['window_s'][0]:.2f}–{r['window_s'][1]:.2f} |"
         )
-    table = "\n".join(lines) + "\n"
+    table = "\n".join(lines + (["", *notes] if notes else [])) + "\n"
     print(table)
     if claim is not None:
         with signals.deferred(), claim:
