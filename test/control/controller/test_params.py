@@ -111,7 +111,6 @@ def test_yaml_is_a_ros2_params_file_with_floats_as_floats():
         ({"td.h": 0.0005}, "td.h", r"\[0.001, inf\) s"),
         ({"eso_smc.k": 20.0}, "eso_smc.k", r"\(0, 1/Δ = 10\]"),
         ({"eso_smc.k": 10.0}, "eso_smc.k", r"ε·k·T < 1"),
-        ({"limits.u_neutral": 10.0}, "limits.u_neutral", "strictly between"),
         ({"pid.anti_windup": "clamp"}, "pid.anti_windup", "conditional, back_calculation, none"),
     ],
 )
@@ -196,3 +195,11 @@ def test_running_controller_keeps_old_params_on_refusal():
                 )
         assert a.update(_sample(k, x)) == b.update(_sample(k, x))
     assert a.params == p and a.algorithm == "eso_smc"
+
+
+def test_a_relation_of_three_limits_names_all_three():
+    with pytest.raises(ParamError) as err:
+        load_controller_params("linear", CONFIG, {"limits.u_neutral": 10.0})
+    assert str(err.value).startswith("limits.u_min/u_neutral/u_max: '0/10/10 V' refused")
+    with pytest.raises(ParamError, match=r"^limits.u_min/u_neutral/u_max: '0/5/0 V'"):
+        load_controller_params("linear", CONFIG, {"limits.u_max": 0.0})

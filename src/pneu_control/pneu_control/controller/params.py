@@ -83,10 +83,11 @@ class LimitsParams:
 
     def _check(self) -> None:
         if not self.u_min < self.u_neutral < self.u_max:
+            # a relation of three fields: name all three (whichever the user changed)
             raise ParamError(
-                "u_neutral",
-                self.u_neutral,
-                f"strictly between u_min = {self.u_min:g} V and u_max = {self.u_max:g} V",
+                "u_min/u_neutral/u_max",
+                f"{self.u_min:g}/{self.u_neutral:g}/{self.u_max:g} V",
+                "u_min < u_neutral < u_max (the closed centre strictly inside the range)",
             )
 
 
