@@ -3,4 +3,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/bootstrap.sh
-.venv/bin/pneu paper --out "${1:-out/paper}"
+.venv/bin/pneu paper --overwrite --out "${1:-out/paper}"  # regenerates: replaces its own outputs

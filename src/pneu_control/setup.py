@@ -47,7 +47,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "pneu = pneu_control.cli.main:main",
+            "pneu = pneu_control.cli.main:cli",
             "linear_controller = pneu_control.nodes.controller_node:main_linear",
             "rotary_controller = pneu_control.nodes.controller_node:main_rotary",
             "logger = pneu_control.nodes.logger_node:main",

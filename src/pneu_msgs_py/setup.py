@@ -23,6 +23,7 @@ setup(
         "rosbags>=0.10",
         "zstandard>=0.22",
         "lz4>=4.0",
+        "filelock>=3.12",
     ],
     extras_require={
         "live": ["foxglove-sdk>=0.30"],  # pneu_msgs_py.live: imported when a server starts

@@ -54,6 +54,7 @@ ROSDEP_PY = {
     "scipy": "python3-scipy",
     "matplotlib": "python3-matplotlib",
     "tqdm": "python3-tqdm",
+    "filelock": "python3-filelock",
 }
 # pip-only libraries (no rosdep key): must be in setup.py install_requires instead
 PIP_ONLY = {
@@ -190,7 +191,7 @@ def _role(pkg: str, f: Path) -> str:
 
 # role folders per package: the tree reads like the architecture (ARCHITECTURE.md)
 ROLES = {
-    "pneu_msgs_py": {"contract", "params", "bag", "live", "nodes", "bench"},
+    "pneu_msgs_py": {"contract", "params", "bag", "live", "lifecycle", "nodes", "bench"},
     "pneu_sim": {"physics", "cycle", "faults", "daq_sim", "nodes", "cli", "bench"},
     "pneu_control": {
         "algorithms",

@@ -48,7 +48,7 @@ def bag_messages(tmp_path_factory) -> dict[str, list]:
             "controller_silent:axis=linear,start_s=0.1,duration_s=0.05",
         ]
     )
-    assert rc == 0
+    assert rc == 3  # the supervisor took the silenced axis safe (a diagnostics event to show)
     msgs: dict[str, list] = {}
     with open(out / "run.mcap", "rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])

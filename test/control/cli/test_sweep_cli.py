@@ -86,12 +86,12 @@ def _error(capsys, argv):
         (["--samples", "2", "--workers", "0"], "--workers: 0 refused"),
         (["--samples", "2", "--gains", "best"], "gains: 'best' refused; allowed: one of paper, retuned, design"),
         (["--samples", "2", "--controller", "mpc"], "controller: 'mpc' refused"),
-        (["--samples", "2", "--experiment", "sine"], "experiment: 'sine' refused"),
+        (["--samples", "2", "--experiment", "sine"], "--experiment: 'sine' refused"),
     ],
 )  # fmt: skip
 def test_bad_options_one_line(tmp_path, capsys, extra, says):
     rc, last = _error(capsys, ["sweep", "--out", str(tmp_path), *extra])
-    assert rc == 1 and says in last
+    assert rc == 2 and says in last
 
 
 def test_a_plant_file_without_ranges_is_refused(tmp_path, capsys):
@@ -111,4 +111,4 @@ def test_a_plant_file_without_ranges_is_refused(tmp_path, capsys):
     plant.write_text(yaml.safe_dump(tree, allow_unicode=True), encoding="utf-8")
     rc, last = _error(capsys, ["sweep", "--out", str(tmp_path / "o"), "--samples", "2",
                                "--plant", str(plant), *TINY])  # fmt: skip
-    assert rc == 1 and "has no range or alternatives to sweep" in last
+    assert rc == 2 and "has no range or alternatives to sweep" in last

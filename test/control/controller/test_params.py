@@ -93,25 +93,24 @@ def test_yaml_is_a_ros2_params_file_with_floats_as_floats():
 @pytest.mark.parametrize(
     ("override", "key", "allowed"),
     [
-        ({"pid.kp": 0.0}, "pid.kp", r"\(0, inf\]"),
-        ({"pid.kp": -0.38}, "pid.kp", r"\(0, inf\]"),
-        ({"pid.ki": -1.0}, "pid.ki", r"\[0, inf\]"),
-        ({"eso_smc.delta": 0.0}, "eso_smc.delta", r"\(0, inf\]"),
-        ({"eso_smc.delta": -0.1}, "eso_smc.delta", r"\(0, inf\]"),
-        ({"eso_smc.epsilon": 0.0}, "eso_smc.epsilon", r"\(0, inf\]"),
-        ({"ladrc.b_0": -5900.0}, "ladrc.b_0", r"\(0, inf\]"),
-        ({"ladrc.omega_0": 0.0}, "ladrc.omega_0", r"\(0, inf\]"),
-        ({"td.r": 0.0}, "td.r", r"\(0, inf\]"),
+        ({"pid.kp": 0.0}, "pid.kp", r"\(0, inf\)"),
+        ({"pid.kp": -0.38}, "pid.kp", r"\(0, inf\)"),
+        ({"pid.ki": -1.0}, "pid.ki", r"\[0, inf\)"),
+        ({"eso_smc.delta": 0.0}, "eso_smc.delta", r"\(0, inf\)"),
+        ({"eso_smc.delta": -0.1}, "eso_smc.delta", r"\(0, inf\)"),
+        ({"eso_smc.epsilon": 0.0}, "eso_smc.epsilon", r"\(0, inf\)"),
+        ({"ladrc.b_0": -5900.0}, "ladrc.b_0", r"\(0, inf\)"),
+        ({"ladrc.omega_0": 0.0}, "ladrc.omega_0", r"\(0, π/sample_time_s\] rad/s.*3141.59"),
+        ({"td.r": 0.0}, "td.r", r"\(0, inf\)"),
         ({"algorithm": "fuzzy"}, "algorithm", "one of pid, ladrc, eso_smc"),
         ({"reference.kind": "square"}, "reference.kind", "one of sine, smooth_step"),
-        ({"reference.frequency_hz": 600.0}, "reference.frequency_hz", r"\[0, 500\) Hz"),
-        ({"reference.frequency_hz": 500.0}, "reference.frequency_hz", r"\[0, 500\) Hz"),
+        ({"reference.frequency_hz": 600.0}, "reference.frequency_hz", r"\(0, 500\) Hz"),
+        ({"reference.frequency_hz": 500.0}, "reference.frequency_hz", r"\(0, 500\) Hz"),
         ({"eso_smc.omega_0": 4000.0}, "eso_smc.omega_0", r"\(0, 3141.59\] rad/s"),
         ({"ladrc.omega_0": 3200.0}, "ladrc.omega_0", r"\(0, 3141.59\] rad/s"),
         ({"td.h": 0.0005}, "td.h", r"\[0.001, inf\) s"),
         ({"eso_smc.k": 20.0}, "eso_smc.k", r"\(0, 1/Δ = 10\]"),
         ({"eso_smc.k": 10.0}, "eso_smc.k", r"ε·k·T < 1"),
-        ({"limits.u_neutral": 10.0}, "limits.u_neutral", "strictly between"),
         ({"pid.anti_windup": "clamp"}, "pid.anti_windup", "conditional, back_calculation, none"),
     ],
 )
@@ -160,9 +159,12 @@ def test_unknown_axis_and_section_refused(tmp_path):
     f.write_text("linear_controller:\n  ros__parameters:\n    algorithm: pid\n")
     with pytest.raises(ParamError, match="rotary_controller"):
         load_controller_params("rotary", f)
-    assert load_controller_params("linear", f).algorithm == "pid"  # missing keys: defaults
-    f.write_text("linear_controller:\n  ros__parameters:\n    pid: {kq: 1.0}\n")
-    with pytest.raises(ParamError, match="pid.kq"):
+    with pytest.raises(
+        ParamError, match=r"c\.yaml:3:5: pid: missing; required: the parameter group kp"
+    ):
+        load_controller_params("linear", f)  # missing keys refused, as in every config file
+    f.write_text(Path(CONFIG).read_text().replace("      kp: 0.38", "      kq: 0.38", 1))
+    with pytest.raises(ParamError, match=r"c\.yaml:\d+:7: pid.kq: 0.38 refused; allowed: no such"):
         load_controller_params("linear", f)
 
 
@@ -221,3 +223,11 @@ def test_real_controller_params_declare_and_round_trip_for_both_axes():
         assert again == params
         ro = {n for n, _, d in decls if d.read_only}
         assert {"sample_time_s", "transport_delay_samples"} <= ro
+
+
+def test_a_relation_of_three_limits_names_all_three():
+    with pytest.raises(ParamError) as err:
+        load_controller_params("linear", CONFIG, {"limits.u_neutral": 10.0})
+    assert str(err.value).startswith("limits.u_min/u_neutral/u_max: '0/10/10 V' refused")
+    with pytest.raises(ParamError, match=r"^limits.u_min/u_neutral/u_max: '0/5/0 V'"):
+        load_controller_params("linear", CONFIG, {"limits.u_max": 0.0})

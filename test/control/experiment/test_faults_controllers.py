@@ -92,7 +92,7 @@ def _spec(faults, include=False, safety=True, duration=1.2):
         sets=["reference.kind=sine", "reference.amplitude=20", "reference.frequency_hz=0.25"],
         duration_s=duration,
         controllers_file=RETUNED,
-        window_start_s=0.2,
+        window_start_s=min(0.2, duration / 2),
         faults=faults,
         include_faults=include,
         safety=safety,
@@ -142,11 +142,18 @@ def test_every_bag_records_the_safety_configuration(tmp_path):
 
 
 def test_unsafe_safety_file_refused_unless_allowed_then_logged(tmp_path):
+    from pneu_msgs_py.params.paths import config_file
+
+    text = config_file("safety.yaml").read_text()
     bad = tmp_path / "safety.yaml"
-    bad.write_text("watchdog_ms: 2000.0\n")
-    with pytest.raises(ParamError, match="watchdog_ms"):
+    bad.write_text(text.replace("watchdog_ms: 5.0 ", "watchdog_ms: 2000.0 "))
+    with pytest.raises(ParamError, match=r"safety\.yaml:\d+:1: watchdog_ms"):
         build_spec(axes=("linear",), duration_s=0.1, controllers_file=RETUNED, safety_file=bad)
-    bad.write_text("watchdog_ms: 2000.0\nallow_unsafe: true\n")
+    bad.write_text(
+        text.replace("watchdog_ms: 5.0 ", "watchdog_ms: 2000.0 ").replace(
+            "allow_unsafe: false", "allow_unsafe: true"
+        )
+    )
     spec = build_spec(axes=("linear",), duration_s=0.1, controllers_file=RETUNED, safety_file=bad)
     res = execute(spec, tmp_path / "run")
     rec = read_run(tmp_path / "run" / "run.mcap").metadata["pneu.safety"]

@@ -62,7 +62,7 @@ def test_replay_cli_rejects_bad_gain_in_one_line(recorded, tmp_path, capsys):
     )
     err = capsys.readouterr().err
     assert (
-        rc == 1
+        rc == 2
         and "omega_0" in err
         and "Traceback" not in err
         and len(err.strip().splitlines()) == 1

@@ -119,8 +119,13 @@ def test_rig_params_refused_with_the_field_named():
 
 
 def test_overrides_apply_as_one_set(tmp_path):
+    import yaml
+    from pneu_msgs_py.params.paths import config_file
+
+    data = yaml.safe_load(config_file("rig.yaml").read_text())
+    data["device"], data["loop"]["timing"] = "PXI1Slot2", "software"
     path = tmp_path / "rig.yaml"
-    path.write_text("device: PXI1Slot2\nloop: {timing: software}\n")
+    path.write_text(yaml.safe_dump(data))
     rig = load_rig_params(path, overrides={"loop.spin_us": 100.0})
     assert rig.device == "PXI1Slot2"
     assert rig.loop.timing == "software" and rig.loop.spin_us == 100.0

@@ -118,19 +118,30 @@ def test_soft_limit_at_rest_exactly_at_the_margin():
     r = Rig()
     x_lo, x_hi = r.sup.soft_limits
     assert x_hi == pytest.approx(0.075 - 0.010)
-    # at rest exactly at the boundary: commands toward the end stop are held at 5 V
+    # at rest exactly at the boundary: the piston at the soft limit trips the axis (latched)
+    # and commands toward the end stop are held at 5 V
     out = r.run(12, x=x_hi, u=(7.0, 6.0))
     assert out == (5.0, 6.0)
-    assert r.sup.status["linear"].state == "LIMITED"
-    assert ("linear", "soft_limit") in rules(r.sup.events(), WARN)
+    assert r.sup.status["linear"].state == "SAFE"
+    ev = r.sup.events()
+    assert ("linear", "stroke_limit") in rules(ev, ERROR)
+    assert ("linear", "soft_limit") in rules(ev, WARN)
+    assert r.tick(x=x_hi, u=(3.0, 6.0)) == (5.0, 6.0)  # latched: nothing passes
+    ok, msg = r.sup.acknowledge("linear")  # allowed while still out there: to retract it
+    assert ok, msg
+    assert r.tick(x=x_hi, u=(7.0, 6.0)) == (5.0, 6.0)  # the hold still refuses extending
     assert r.tick(x=x_hi, u=(3.0, 6.0)) == (3.0, 6.0)  # retracting passes
-    # leaving needs the hysteresis
+    assert r.sup.status["linear"].state == "LIMITED"
+    # a hair inside: no trip, no hold
     r2 = Rig()
     assert r2.run(12, x=x_hi - 1e-9, u=(7.0, 6.0)) == (7.0, 6.0)
     assert r2.sup.status["linear"].state == "OK"
     # the lower end with the valve plumbed the other way round
     r3 = Rig(dataclasses.replace(SafetyParams(), extend_above_neutral=False))
     assert r3.run(12, x=x_lo, u=(7.0, 6.0)) == (5.0, 6.0)  # 7 V retracts here
+    assert ("linear", "stroke_limit") in rules(r3.sup.events(), ERROR)
+    assert r3.sup.acknowledge("linear")[0]
+    assert r3.tick(x=x_lo, u=(7.0, 6.0)) == (5.0, 6.0)
     assert r3.tick(x=x_lo, u=(2.0, 6.0)) == (2.0, 6.0)
 
 
@@ -152,7 +163,8 @@ def test_soft_limit_counts_the_braking_distance():
     assert out[0] == 7.0
     # hysteresis: back away by more than stroke_hyst_m and the limit releases
     r = Rig(p)
-    r.run(12, x=x_hi)
+    r.run(12, x=x_hi)  # at the limit: trips (stroke_limit), acknowledged to retract
+    assert r.sup.acknowledge("linear")[0]
     r.sup.events()
     r.run(12, x=x_hi - 0.0015)
     assert ("linear", "soft_limit") in rules(r.sup.events(), OK)
@@ -234,7 +246,11 @@ def test_pressure_above_supply_plus_margin():
 
 def test_position_beyond_the_end_stops_is_implausible():
     r = Rig()
-    assert r.tick(x=-0.080, u=(3.0, 6.0))[0] == 5.0  # soft limit holds the retracting command
+    assert r.tick(x=-0.080, u=(3.0, 6.0))[0] == 5.0  # beyond the soft limit: tripped
+    assert r.sup.status["linear"].state == "SAFE"
+    assert ("linear", "stroke_limit") in rules(r.sup.events(), ERROR)
+    assert r.sup.acknowledge("linear")[0]  # (to retract)
+    assert r.tick(x=-0.080, u=(3.0, 6.0))[0] == 5.0  # the soft limit holds the retracting command
     assert r.sup.status["linear"].state == "LIMITED"
     assert r.tick(x=-0.080, u=(7.0, 6.0))[0] == 7.0  # at |x| = stroke/2 + margin: plausible
     assert r.tick(x=-0.0801, u=(7.0, 6.0))[0] == 5.0

@@ -252,8 +252,11 @@ def _child(path, how):
 def test_hard_kill_leaves_complete_chunks_readable(tmp_path):
     p = tmp_path / "killed.mcap"
     assert _child(p, "kill").returncode == -9
+    assert not p.exists()  # a killed writer leaves the clearly named partial file only
+    with pytest.raises(NotMcapError, match=r"killed\.mcap\.partial is there"):
+        read_run(p)
     with pytest.warns(TruncatedBagWarning):
-        d = read_run(p)
+        d = read_run(p.with_name("killed.mcap.partial"))
     n = len(d["/pneu/pressure/cylinder_1"])
     assert 1000 < n <= 1778
     assert_same(d["/pneu/pressure/cylinder_1"]["fluid_pressure"], np.arange(n, dtype=float))

@@ -53,11 +53,10 @@ def test_writes_csv_and_png_and_prints_numbers(tmp_path, capsys):
 @pytest.mark.parametrize(
     "argv",
     [
-        ["--duration", "-1"],
         ["--duration", "abc"],
         ["--linear-voltage", "11"],
         ["--rotary-voltage", "-0.5"],
-        ["--seed", "-2"],
+        ["--seed", "x"],
         [],  # --out is required
     ],
 )
@@ -70,6 +69,23 @@ def test_bad_options_exit_with_usage(argv, tmp_path, capsys):
     assert "usage:" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("argv", "field", "allowed"),
+    [
+        (["--duration", "-1"], "--duration", "[0.01, 600] s"),
+        (["--duration", "1e9"], "--duration", "[0.01, 600] s"),
+        (["--seed", "-2"], "--seed", "[0, 4294967295]"),
+    ],
+)
+def test_bad_values_are_one_line_naming_the_option(argv, field, allowed, tmp_path, capsys):
+    from pneu_control.cli.main import main
+
+    assert main(["sim", *argv, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"pneu sim: error: {field}:") and allowed in err[0]
+    assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
 def test_bad_plant_file_is_one_line_error(tmp_path):
     with open(config_file("plant.yaml"), encoding="utf-8") as fh:
         tree = yaml.safe_load(fh)
@@ -78,6 +94,7 @@ def test_bad_plant_file_is_one_line_error(tmp_path):
     bad.write_text(yaml.safe_dump(tree), encoding="utf-8")
     args = parse(["--out", str(tmp_path / "o"), "--plant", str(bad), "--no-plot"])
     with pytest.raises(
-        ValueError, match=r"^linear\.V_1d: 0\.0 refused; allowed: \(0, 0\.001\] m\^3$"
+        ValueError,
+        match=r"plant\.yaml:\d+:\d+: linear\.V_1d: 0\.0 refused; allowed: \(0, 0\.001\] m\^3$",
     ):
         cli_sim.run(args)

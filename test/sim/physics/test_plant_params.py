@@ -134,7 +134,7 @@ def test_load_plant_bad_file_refused_whole(tmp_path, tree):
     t["rotary"]["J_m"]["value"] = math.inf
     path = tmp_path / "plant.yaml"
     path.write_text(yaml.safe_dump(t), encoding="utf-8")
-    with pytest.raises(ParamError, match=r"^rotary\.J_m: inf refused"):
+    with pytest.raises(ParamError, match=r"plant\.yaml:\d+:\d+: rotary\.J_m: inf refused"):
         load_plant(path)
 
 

@@ -70,7 +70,16 @@ def lambda_r_field(default: float, source: str = "") -> Any:
 
 
 def omega_0_field(default: float, source: str = "", desc: str = "observer bandwidth ω0") -> Any:
-    return param(default, unit="rad/s", desc=desc, **POSITIVE, source=source)
+    return param(
+        default,
+        unit="rad/s",
+        desc=desc,
+        **POSITIVE,
+        source=source,
+        # the upper bound depends on the controller's period (AxisControllerParams._check)
+        allowed="(0, π/sample_time_s] rad/s: up to the Nyquist frequency (3141.59 rad/s at "
+        "the paper's T = 1 ms)",
+    )
 
 
 def b_0_field(default: float, source: str = "", desc: str = "input gain estimate b0") -> Any:

@@ -117,6 +117,37 @@ class AxisMetrics:
     def window_s(self) -> list[float]:
         return [self.window_start_s, self.window_end_s]
 
+    def why_empty(self) -> str:
+        """Why there is no figure (an empty window), with what to pass; "" if there is one."""
+        if self.n_samples > 0:
+            return ""
+        t0, t1 = self.window_start_s, self.window_end_s
+        if math.isnan(t0):
+            return (
+                "no steady-state window: the speed never came within 1 % of the reference; "
+                f"pass --window-start S (below {t1:.2f} s) to measure anyway"
+            )
+        if t0 > t1:
+            return (
+                f"no steady-state window: it opens at {t0:.2f} s, after the run's end at "
+                f"{t1:.2f} s; run longer, or pass --window-start S (below {t1:.2f} s)"
+            )
+        return (
+            f"no sample in the window {t0:.2f}–{t1:.2f} s outside the fault intervals; "
+            "pass --include-faults to measure over them"
+        )
+
+    def line(self, algorithm: str) -> str:
+        """One report line: the figures and the window, or why there are none."""
+        why = self.why_empty()
+        if why:
+            return f"{self.axis:7s} {algorithm:12s} {why}"
+        return (
+            f"{self.axis:7s} {algorithm:12s} e_max = {self.e_max:8.4f} {self.unit}   "
+            f"RMSE = {self.rmse:8.4f} {self.unit}   window {self.window_start_s:.2f}–"
+            f"{self.window_end_s:.2f} s ({self.n_samples} samples)"
+        )
+
     def to_dict(self) -> dict:
         d = asdict(self)
         d["window_s"] = self.window_s

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from pneu_msgs_py.contract.units import MM_PER_M, RPM_PER_RAD_S
 
-__all__ = ["Series", "plot_runs"]
+__all__ = ["FORMATS", "Series", "plot_runs"]
 
 _SCALE = {"linear": (MM_PER_M, "mm", "displacement"), "rotary": (RPM_PER_RAD_S, "rpm", "speed")}
 
@@ -40,10 +40,22 @@ def _pyplot():
     return plt
 
 
+FORMATS = (".png", ".pdf", ".svg")
+
+
 def plot_runs(
-    series: list[Series], title: str, path: str | Path, *, pressures: bool = False
+    series: list[Series],
+    title: str,
+    path: str | Path,
+    *,
+    pressures: bool = False,
+    fmt: str | None = None,
 ) -> Path:
-    """One figure: a column per run with reference/measured, error, valve voltage rows."""
+    """One figure: a column per run with reference/measured, error, valve voltage rows.
+
+    ``fmt`` (``png``, ``pdf``, ``svg``; default: from ``path``'s suffix) lets the
+    figure be written under a temporary name.
+    """
     plt = _pyplot()
     n = len(series)
     rows = 4 if pressures else 3
@@ -77,6 +89,6 @@ def plot_runs(
     fig.tight_layout()
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    fig.savefig(out, dpi=110, format=fmt or (out.suffix.lstrip(".") or "png"))
     plt.close(fig)
     return out

@@ -38,7 +38,7 @@ from pneu_control.analysis.fault_marks import (
     safe_intervals,
 )
 from pneu_control.analysis.metrics import AxisMetrics, WindowSpec
-from pneu_control.experiment.bag_log import FAULTS_METADATA, RUN_METADATA
+from pneu_control.experiment.bag_log import END_METADATA, FAULTS_METADATA, RUN_METADATA
 
 __all__ = [
     "AxisTrace",
@@ -79,10 +79,33 @@ class RunAnalysis:
     warnings: list[str]
     faults: list[FaultInterval] = field(default_factory=list)  # marked intervals
     include_faults: bool = False  # metrics include the fault intervals
+    end: dict[str, str] = field(default_factory=dict)  # the pneu.end record ({} if none)
+
+    @property
+    def interrupted(self) -> bool:
+        return self.end.get("interrupted") == "true"
+
+    def status_line(self) -> str:
+        """How the recorded run ended, in one line ("" for a run that completed)."""
+        e = self.end
+        status = e.get("status", "")
+        if status == "interrupted":
+            planned = int(e.get("planned_samples", "0") or 0) * _period_s(self.config)
+            return (
+                f"run interrupted by {e.get('signal') or 'a signal'} at "
+                f"{float(e.get('last_sample_s', 'nan')):.3f} s of {planned:g} s"
+                f"{' (' + e['interrupted_utc'] + ')' if e.get('interrupted_utc') else ''}: "
+                "the metrics are over what ran"
+            )
+        if status == "failed":
+            return f"run failed: {e.get('error', '?')}; the bag holds what ran"
+        return ""
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "path": self.path,
+            "interrupted": self.interrupted,
+            "end": self.end,
             "metrics": {a: m.to_dict() for a, m in self.metrics.items()},
             "fault_intervals": [iv.to_dict() for iv in self.faults],
             "faults_excluded": not self.include_faults,
@@ -93,21 +116,33 @@ class RunAnalysis:
 
 
 def run_config(data: RunData) -> dict[str, Any]:
-    """The run's config echo from the ``pneu.run`` metadata record ({} if absent)."""
+    """The run's config echo from the ``pneu.run`` metadata record ({} if absent).
+
+    A damaged record (not JSON, not a mapping) is left out with a warning in
+    ``data.warnings``: the messages are still analysed, over the whole run.
+    """
     rec = data.metadata.get(RUN_METADATA)
     if not rec or "config_json" not in rec:
         return {}
     try:
-        return json.loads(rec["config_json"])
-    except json.JSONDecodeError as err:
-        raise BagError(
-            data.path, f"metadata {RUN_METADATA}.config_json is not JSON: {err}"
-        ) from None
+        config = json.loads(rec["config_json"])
+        if not isinstance(config, dict):
+            raise ValueError("not a mapping")
+        return config
+    except ValueError as err:
+        data.warnings.append(
+            f"{data.path}: metadata {RUN_METADATA}.config_json is damaged ({err}); "
+            "analysed without it (windows: the whole run)"
+        )
+        return {}
 
 
 def _axes_in(data: RunData, config: dict[str, Any]) -> list[str]:
-    if config.get("axes"):
-        return list(config["axes"])
+    axes = config.get("axes")
+    if axes:
+        if isinstance(axes, list) and all(a in CONTROLLER_STATE_TOPIC for a in axes):
+            return list(axes)
+        data.warnings.append(f"{data.path}: metadata axes {axes!r} damaged: axes from the topics")
     return [a for a, topic in CONTROLLER_STATE_TOPIC.items() if topic in data.topics]
 
 
@@ -215,9 +250,15 @@ def analyze(
     config = run_config(data)
     axes = axes or _axes_in(data, config)
     if not axes:
-        raise MissingTopicError(
-            path, "no /pneu/<axis>/controller_state topic: nothing to analyse (is this a pneu run?)"
-        )
+        raise MissingTopicError(path, _not_a_run(data))
+    for axis in axes:
+        for topic in (CONTROLLER_STATE_TOPIC[axis], JOINT_STATE_TOPIC[axis]):
+            if topic not in data.topics or not len(data.topics[topic]):
+                raise MissingTopicError(
+                    path,
+                    f"the {axis} axis has no {topic} messages to analyse "
+                    f"(axes recorded: {', '.join(_axes_in(data, {})) or 'none'})",
+                )
     traces = axis_traces(data, axes)
     t0_ns = min(
         (
@@ -227,19 +268,55 @@ def analyze(
         ),
         default=0,
     )
-    intervals = fault_intervals(data, config, axes, t0_ns)
+    try:
+        intervals = fault_intervals(data, config, axes, t0_ns)
+    except BagError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        data.warnings.append(
+            f"{path}: fault records damaged ({type(err).__name__}); no fault marked"
+        )
+        intervals = []
     metrics: dict[str, AxisMetrics] = {}
     warnings = list(data.warnings)
+    end = dict(data.metadata.get(END_METADATA) or {})
+    source = (data.metadata.get(RUN_METADATA) or {}).get("source", "")
+    if not end and source.startswith("pneu in-process runner"):
+        warnings.append(
+            f"{path}: no end record: the run was cut short (process killed?); "
+            "the metrics are over the messages that were written"
+        )
     for axis, tr in traces.items():
         spec = window
         if spec is None:
-            wdict = config.get("windows", {}).get(axis)
+            windows = config.get("windows")
+            wdict = windows.get(axis) if isinstance(windows, dict) else None
+            spec = WindowSpec(kind="fixed")
             if wdict is None:
                 warnings.append(f"{path}: no window in metadata for {axis}; using the whole run")
-                spec = WindowSpec(kind="fixed")
             else:
-                spec = WindowSpec.from_dict(wdict)
+                try:
+                    spec = WindowSpec.from_dict(wdict)
+                except (TypeError, ValueError):
+                    warnings.append(
+                        f"{path}: window of {axis} in the metadata damaged; using the whole run"
+                    )
         metrics[axis] = axis_metrics(
             axis, tr.t, tr.reference, tr.measured, spec, intervals, include_faults
         )
-    return RunAnalysis(str(path), config, metrics, traces, warnings, intervals, include_faults)
+    return RunAnalysis(str(path), config, metrics, traces, warnings, intervals, include_faults, end)
+
+
+def _not_a_run(data: RunData) -> str:
+    """ "not a pneu run: no /pneu topics; found /chatter (std_msgs/msg/String)" and the like."""
+    from pneu_msgs_py.bag.reader import iter_topic_names
+
+    try:
+        found = sorted(set(iter_topic_names(data.path)))
+    except BagError:
+        found = [(t, a.ros_type) for t, a in data.topics.items()]
+    listed = ", ".join(f"{t} ({ty})" for t, ty in found[:8]) + (", ..." if len(found) > 8 else "")
+    pneu = [t for t, _ in found if t.startswith("/pneu/")]
+    if not pneu:
+        return f"not a pneu run: no /pneu topics; found {listed or 'no topics'}"
+    return f"not a pneu run: no /pneu/<axis>/controller_state topic; found {listed}"

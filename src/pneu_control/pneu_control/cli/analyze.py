@@ -6,6 +6,8 @@ import argparse
 import json
 import math
 
+from pneu_msgs_py.params.core import ParamError
+
 from pneu_control.analysis.metrics import WindowSpec
 from pneu_control.analysis.run_analysis import analyze
 
@@ -30,26 +32,34 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def check_window_start(value: float | None) -> None:
+    """``--window-start``: a finite time ≥ 0 (one line naming the option otherwise)."""
+    if value is not None and not (math.isfinite(value) and value >= 0.0):
+        raise ParamError("--window-start", value, "a finite time [0, inf) s from the run's start")
+
+
 def run(args: argparse.Namespace) -> int:
+    check_window_start(args.window_start)
     window = (
         None if args.window_start is None else WindowSpec(kind="fixed", t_start_s=args.window_start)
     )
     res = analyze(args.run, window=window, include_faults=args.include_faults)
     if args.json:
-        print(json.dumps(res.to_dict(), indent=2, sort_keys=True))
+        print(json.dumps(res.to_dict(), indent=2, sort_keys=True, default=_json_safe))
         return 0
     for w in res.warnings:
         print(f"warning: {w}")
+    if res.status_line():
+        print(res.status_line())
     for iv in res.faults:
         end = "end" if math.isinf(iv.end_s) else f"{iv.end_s:.3f} s"
         what = "fault injected" if iv.kind == "injected" else "valve held safe"
         note = "included in" if res.include_faults else "excluded from"
         print(f"{iv.axis:7s} {what}: {iv.start_s:.3f} s – {end} ({iv.cause}); {note} the metrics")
     for axis, m in res.metrics.items():
-        alg = res.traces[axis].algorithm
-        ws = "never" if math.isnan(m.window_start_s) else f"{m.window_start_s:.2f}"
-        print(
-            f"{axis:7s} {alg:12s} e_max = {m.e_max:.4f} {m.unit}   RMSE = {m.rmse:.4f} {m.unit}"
-            f"   window {ws}–{m.window_end_s:.2f} s ({m.n_samples} samples)"
-        )
+        print(m.line(res.traces[axis].algorithm))
     return 0
+
+
+def _json_safe(o):
+    return str(o)

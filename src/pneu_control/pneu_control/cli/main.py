@@ -1,9 +1,11 @@
 """``pneu``: the user's command line. One subcommand per module.
 
 Each subcommand module exposes ``NAME``, ``HELP``, ``add_arguments(parser)``
-and ``run(args) -> int``. User errors (bad config, bad option values, bad
-files) reach the user as one line on stderr and a non-zero exit, never a
-traceback.
+and ``run(args) -> int``. Errors reach the user as one line on stderr, never
+a traceback, with the exit codes of :mod:`pneu_msgs_py.lifecycle.exits`:
+0 success, 1 runtime error, 2 bad input (``ParamError``, ``BagError``,
+refused options), 3 the supervisor took an axis safe, 128 + N interrupted by
+signal N (SIGHUP 129, SIGINT 130, SIGTERM 143).
 """
 
 from __future__ import annotations
@@ -11,8 +13,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 import warnings
+from typing import NoReturn
+
+from pneu_msgs_py.lifecycle import exits, signals
 
 __all__ = ["main", "SUBCOMMANDS"]
 
@@ -28,6 +34,7 @@ SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("plot", "pneu_control.cli.plot"),
     ("compare", "pneu_control.cli.compare"),
     ("replay", "pneu_control.cli.replay"),
+    ("recover", "pneu_control.cli.recover"),
     ("tune", "pneu_control.cli.tune"),
     ("excite", "pneu_control.cli.excite"),
     ("identify", "pneu_control.cli.identify"),
@@ -37,7 +44,17 @@ SUBCOMMANDS: tuple[tuple[str, str], ...] = (
 
 
 class UserError(Exception):
-    """An error the user can fix; printed as one line."""
+    """An error the user can fix; printed as one line (exit 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line refusals: ``pneu run: error: argument --duration: ...`` (exit 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(
+            exits.BAD_INPUT,
+            f"{self.prog}: error: {_one_line(message)} (see {self.prog} --help)\n",
+        )
 
 
 def _available() -> list[tuple[str, object]]:
@@ -53,9 +70,11 @@ def _available() -> list[tuple[str, object]]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="pneu",
         description="pneu: servo stack for a linear-rotary pneumatic actuator (twin, controllers, bags).",
+        epilog="exit codes: "
+        + "; ".join(f"{code} {text.split(':')[0]}" for code, text in exits.EXIT_CODES),
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, mod in _available():
@@ -66,33 +85,115 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    print(f"pneu: warning: {message}", file=sys.stderr)
+    print(f"pneu: warning: {_one_line(str(message))}", file=sys.stderr)
 
 
-def main(argv: list[str] | None = None) -> int:
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def main(argv: list[str] | None = None, *, restore_signals: bool = True) -> int:
+    """Run one subcommand; return its exit code (README: 0, 1, 2, 3, 129, 130, 143).
+
+    ``restore_signals`` False (the ``pneu`` process itself): after the command, signals
+    stay recorded-only, so one arriving while the interpreter shuts down changes nothing.
+    """
+    restore = signals.install()  # first: a signal at any moment from here on ends cleanly
+    try:
+        return _main(argv)
+    except signals.Interrupted as err:  # during argument parsing or set-up
+        print(f"pneu: interrupted by {signals.signal_name(err.signum)}", file=sys.stderr)
+        return exits.interrupted_code(err.signum)
+    finally:
+        if restore_signals:
+            restore()
+        else:
+            signals.STATE.defer += 1  # from here to the exit: record, never raise
+
+
+def cli() -> NoReturn:
+    """The ``pneu`` console script."""
+    code = main(restore_signals=False)
+    # the command is done and its files are finished: a signal from here to the exit is
+    # ignored (Python's shutdown would reset a Python handler to the default, which kills)
+    for s in signals.SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    sys.exit(code)
+
+
+def _main(argv: list[str] | None) -> int:
     warnings.showwarning = _show_warning  # one line per warning, no source echo
     parser = build_parser()
-    args = parser.parse_args(argv)  # argparse exits 2 with a usage line on bad options
     try:
-        return int(args._run(args) or 0)
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:  # --help (0) or a refused option (2, one line printed)
+        return int(exit_.code or 0) if not isinstance(exit_.code, str) else exits.BAD_INPUT
+    name = f"pneu {args.command}"
+    try:
+        code = int(args._run(args) or 0)
+    except signals.Interrupted as err:
+        print(
+            f"{name}: interrupted by {signals.signal_name(err.signum)}; "
+            "no output was left half-written",
+            file=sys.stderr,
+        )
+        return exits.interrupted_code(err.signum)
     except KeyboardInterrupt:
-        print("pneu: interrupted", file=sys.stderr)
-        return 130
+        print(f"{name}: interrupted", file=sys.stderr)
+        return exits.interrupted_code(signal.SIGINT)
+    except BrokenPipeError:  # stdout closed early (| head): not an error of ours
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return exits.OK
     except Exception as err:
-        if not _is_user_error(err) or os.environ.get("PNEU_DEBUG"):
+        if os.environ.get("PNEU_DEBUG"):
             raise
-        print(f"pneu {args.command}: error: {err}", file=sys.stderr)
-        return 1
+        code, text = _classify(err)
+        print(f"{name}: error: {_one_line(text)}", file=sys.stderr)
+        return code
+    sig = signals.pending()
+    if sig is not None and code in (exits.OK, exits.SAFETY_STOP):
+        return exits.interrupted_code(sig)
+    return code
 
 
-def _is_user_error(err: Exception) -> bool:
-    """Errors a user can fix (bad config, option, file) -> one line, no traceback."""
-    from pneu_msgs_py.bag.errors import BagError
+def _classify(err: Exception) -> tuple[int, str]:
+    """(exit code, one line) for an exception that reached the command line."""
+    from pneu_msgs_py.bag.errors import BagError, BagWriteError
     from pneu_msgs_py.live.errors import LiveError
     from pneu_msgs_py.params.core import ParamError
 
-    return isinstance(err, (ParamError, BagError, LiveError, UserError, OSError, ValueError))
+    if isinstance(err, BagWriteError):
+        return exits.RUNTIME_ERROR, str(err)
+    if isinstance(err, (ParamError, BagError, LiveError, UserError)):
+        return exits.BAD_INPUT, str(err)
+    if isinstance(err, ValueError) and _raised_by_pneu(err):  # our checks refuse a value
+        return exits.BAD_INPUT, str(err)
+    if isinstance(err, OSError):
+        where = f"{err.filename}: " if err.filename else ""
+        return exits.RUNTIME_ERROR, f"{where}{err.strerror or err}"
+    if isinstance(err, MemoryError):
+        return exits.RUNTIME_ERROR, "out of memory"
+    return (
+        exits.RUNTIME_ERROR,
+        f"internal error ({type(err).__name__}: {err}); please report it "
+        "(PNEU_DEBUG=1 shows the traceback)",
+    )
+
+
+def _raised_by_pneu(err: Exception) -> bool:
+    """Was ``err`` raised in the project's own code (a refusal), not inside numpy & co (a bug)?"""
+    tb = err.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    where = tb.tb_frame.f_code.co_filename if tb is not None else ""
+    return any(
+        f"{pkg}{os.sep}" in where
+        for pkg in ("pneu_control", "pneu_sim", "pneu_msgs_py", "pneu_driver")
+    )
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    cli()

@@ -3,14 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 from pathlib import Path
 
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.outputs import OutputDir
+from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.paths import config_dir
+from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.analysis.plots import Series, plot_runs
 from pneu_control.cli.progress import counted, progress_bar
+from pneu_control.controller.params import load_controller_params
 from pneu_control.experiment import paper, session
 from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, Experiment, experiment_by_id
 
@@ -21,7 +27,17 @@ HELP = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="new or empty directory (or --overwrite): table, figures, one directory per run",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of a previous pneu paper in DIR (other files are left alone)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the runs in the table (and bags)")
     p.add_argument(
         "--seeds",
@@ -75,15 +91,51 @@ def _series(result, exp: Experiment, label: str, m) -> Series:
     )
 
 
+MAX_SEEDS = 100
+
+
+def _artefacts(experiments, uncertainty: int = 0) -> tuple[str, ...]:
+    names = ["paper_table.json", "paper_table.md", *(["uncertainty"] if uncertainty else [])]
+    names += [f"{exp.id}__{g}.png" for exp in experiments for g in paper.PAPER_GAIN_SETS]
+    return tuple(names)
+
+
 def run(args: argparse.Namespace) -> int:
     from pneu_sim.physics.plant_file import load_plant
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    plant = load_plant(args.plant)
-    results: dict[tuple[str, str], object] = {}
+    # everything checked before anything is written
+    if not 1 <= args.seeds <= MAX_SEEDS:
+        raise ParamError("--seeds", args.seeds, f"an integer in [1, {MAX_SEEDS}]")
+    session.check_seed(args.seed)
+    session.check_seed(args.seed + args.seeds - 1, "--seed + --seeds - 1")
+    if args.uncertainty < 0:
+        raise ParamError("--uncertainty", args.uncertainty, "an integer >= 0")
+    from pneu_control.cli.sweep import check_executor_args
 
+    check_executor_args(args)
+    experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
     cfg = Path(args.config_dir) if args.config_dir else config_dir()
+    if not cfg.is_dir():
+        raise ParamError("--config-dir", str(cfg), "a directory holding controllers*.yaml")
+    with from_option("--plant" if args.plant else None):
+        plant = load_plant(args.plant)
+    for gains in paper.GAIN_SETS.values():  # every controllers file, strictly, before any run
+        for axis in ("linear", "rotary"):
+            with from_option("--config-dir" if args.config_dir else None):
+                load_controller_params(axis, cfg / gains)
+    claim = OutputDir(
+        args.out,
+        _artefacts(experiments, args.uncertainty),
+        overwrite=args.overwrite,
+        inputs=[args.plant],
+    ).check()
+    with claim:
+        return _run(args, claim, plant, cfg, experiments)
+
+
+def _run(args, claim: OutputDir, plant, cfg: Path, experiments) -> int:
+    out = claim.path
+    results: dict[tuple[str, str], object] = {}
 
     plant_abs = paper.absolute_supply_plant(plant)
 
@@ -102,7 +154,9 @@ def run(args: argparse.Namespace) -> int:
             name=f"{exp.id}/{controller}/{gains}",
         )
         spec = _with_window(spec, exp)
-        result = session.execute(spec, run_dir, bag=True)
+        result = session.execute(spec, run_dir, bag=True, overwrite=args.overwrite)
+        if result.interrupted:  # that run is finished (interrupted: true); stop here
+            raise signals.Interrupted(signals.pending() or signal.SIGINT)
         m = session.metrics_from_bag(run_dir / "run.mcap", exp.axis)
         results[(exp.id, controller, gains)] = (result, m)
         return result, m
@@ -119,18 +173,13 @@ def run(args: argparse.Namespace) -> int:
             controllers_file=cfg / paper.GAIN_SETS[gains],
             plant=plant_for(gains),
         )
-        return run_spec(_with_window(spec, exp)).metrics[exp.axis]
+        result = run_spec(_with_window(spec, exp))
+        if result.interrupted:
+            raise signals.Interrupted(signals.pending() or signal.SIGINT)
+        return result.metrics[exp.axis]
 
-    if args.seeds < 1:
-        raise ValueError(f"--seeds: {args.seeds} refused; allowed: an integer >= 1")
-    if args.uncertainty < 0:
-        raise ValueError(f"--uncertainty: {args.uncertainty} refused; allowed: an integer >= 0")
-    from pneu_control.cli.sweep import check_executor_args
-
-    check_executor_args(args)
     t0 = time.perf_counter()
     print(f"pneu paper: experiments of the paper on the twin (seed {args.seed})")
-    experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
     n_runs = sum(len(paper.runs_for(e)) for e in experiments) * args.seeds
     bar = progress_bar(n_runs, "pneu paper", unit="run")  # one step per run, seeds included
     rows = paper.run_paper(
@@ -143,7 +192,8 @@ def run(args: argparse.Namespace) -> int:
         log=bar.write,
     )
     bar.close()
-    paper.write_table(rows, out, extra={"seed": args.seed, "seeds": args.seeds})
+    with signals.deferred():
+        paper.write_table(rows, out, extra={"seed": args.seed, "seeds": args.seeds})
     band_md = ""
     if args.uncertainty:
         band_md = _uncertainty(args, rows, experiments, cfg, out)
@@ -161,7 +211,10 @@ def run(args: argparse.Namespace) -> int:
                     _series(results[k][0], exp, f"{k[1]} ({k[2]} gains)", results[k][1])
                     for k in keys
                 ]
-                plot_runs(series, f"{exp.title}: {gains} gains", out / f"{exp.id}__{gains}.png")
+                name = f"{exp.id}__{gains}.png"
+                with signals.deferred():
+                    plot_runs(series, f"{exp.title}: {gains} gains", claim.partial(name), fmt="png")
+                    claim.publish(name)
     print()
     print(paper.render_markdown(rows))
     if band_md:
@@ -177,11 +230,8 @@ def run(args: argparse.Namespace) -> int:
 def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
     """The rows over ``--uncertainty`` plant samples: out/uncertainty/, and the band
     table appended to paper_table.md/json beside the nominal figures."""
-    import json
-
     from pneu_control.cli.sweep import progress_printer
     from pneu_control.sweep.engine import plan_sweep, run_sweep
-    from pneu_control.sweep.report import write_sweep
 
     plan = plan_sweep(
         samples=args.uncertainty,
@@ -204,6 +254,15 @@ def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
         progress=progress_printer("uncertainty"),
     )
     nominal = {(r.id, r.controller, r.gains): (r.e_max, r.rmse) for r in rows}
+    with signals.deferred():
+        return _write_uncertainty(args, result, out, nominal, len(plan.tasks))
+
+
+def _write_uncertainty(args, result, out: Path, nominal, n_tasks: int) -> str:
+    import json
+
+    from pneu_control.sweep.report import write_sweep
+
     _, _, md = write_sweep(result, out / "uncertainty", plots=not args.no_plots, nominal=nominal)
     md = f"## Over {args.uncertainty} plant samples (uncertainty/)\n\n{md}"
     with open(out / "paper_table.md", "a", encoding="utf-8") as fh:
@@ -212,8 +271,8 @@ def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
     doc["uncertainty"] = json.loads((out / "uncertainty" / "summary.json").read_text())
     (out / "paper_table.json").write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
     print(
-        f"  uncertainty: {len(plan.tasks)} runs in {result.wall_s:.1f} s "
-        f"({len(plan.tasks) / result.wall_s:.2f} runs/s)",
+        f"  uncertainty: {n_tasks} runs in {result.wall_s:.1f} s "
+        f"({n_tasks / result.wall_s:.2f} runs/s)",
         file=sys.stderr,
     )
     return md

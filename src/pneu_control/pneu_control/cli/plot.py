@@ -5,7 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pneu_control.analysis.plots import Series, plot_runs
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.outputs import OutputFile
+
+from pneu_control.analysis.plots import FORMATS, Series, plot_runs
 from pneu_control.analysis.run_analysis import analyze
 
 NAME = "plot"
@@ -14,7 +17,13 @@ HELP = "paper-style figure of a run bag: reference vs measured, error, valve vol
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", metavar="RUN", help=".mcap file or rosbag2 directory")
-    p.add_argument("--out", default=None, metavar="PNG", help="default: RUN with .png")
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="PNG",
+        help="figure file (.png, .pdf or .svg; new, or --overwrite); default: RUN with .png",
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace the figure if it exists")
 
 
 def series_of(res, label_prefix: str = "") -> list[Series]:
@@ -37,9 +46,19 @@ def series_of(res, label_prefix: str = "") -> list[Series]:
 
 
 def run(args: argparse.Namespace) -> int:
-    res = analyze(args.run)
     src = Path(args.run)
     out = Path(args.out) if args.out else src.with_suffix(".png") if src.suffix else src / "run.png"
-    plot_runs(series_of(res), str(src), out, pressures=True)
-    print(f"wrote {out}")
+    claim = OutputFile(out, overwrite=args.overwrite, inputs=[src], suffixes=FORMATS).check()
+    res = analyze(args.run)
+    with claim:
+        try:
+            with signals.deferred():
+                plot_runs(
+                    series_of(res), str(src), claim.partial, pressures=True, fmt=out.suffix[1:]
+                )
+                claim.publish()
+        except BaseException:
+            claim.discard()
+            raise
+    print(f"wrote {claim.path}")
     return 0

@@ -5,7 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 
+from pneu_msgs_py.lifecycle.outputs import OutputFile
+from pneu_msgs_py.params.core import ParamError
+
 from pneu_control.analysis.run_analysis import analyze
+from pneu_control.controller.params import ALGORITHMS
 from pneu_control.experiment.replay import OPEN_LOOP_NOTE, replay
 from pneu_control.experiment.session import parse_sets
 
@@ -29,7 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="KEY=VALUE",
         help="parameter override, e.g. eso_smc.omega_0=40.0 (validated as one set)",
     )
-    p.add_argument("--out", required=True, metavar="NEW.mcap")
+    p.add_argument("--out", required=True, metavar="NEW.mcap", help="new bag (never RUN itself)")
+    p.add_argument("--overwrite", action="store_true", help="replace NEW.mcap if it exists")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,11 +42,17 @@ def run(args: argparse.Namespace) -> int:
     if args.axis:
         axes = ["linear", "rotary"] if args.axis == "both" else [args.axis]
     sets = list(args.set)
+    if args.controller is not None and args.controller not in ALGORITHMS:
+        raise ParamError("--controller", args.controller, "one of " + ", ".join(ALGORITHMS))
     if args.controller:
         sets.insert(0, f"algorithm={args.controller}")
     probe_axes = tuple(axes or ("linear", "rotary"))
     overrides = parse_sets(sets, probe_axes)
-    used = replay(args.run, args.out, axes=axes, overrides=overrides)
+    claim = OutputFile(
+        args.out, overwrite=args.overwrite, inputs=[args.run], suffixes=(".mcap",)
+    ).check()
+    with claim:  # the bag is written as NEW.mcap.partial and renamed over NEW.mcap when complete
+        used = replay(args.run, claim.path, axes=axes, overrides=overrides)
     print(f"pneu replay: {OPEN_LOOP_NOTE}", file=sys.stderr)
     res = analyze(args.out)
     for axis, params in used.items():

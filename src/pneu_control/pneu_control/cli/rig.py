@@ -84,16 +84,15 @@ def run(args: argparse.Namespace) -> int:
     rig = load_rig_params(args.rig)
     echo = session.config_echo(spec) | {"backend": args.backend}
     print(f"pneu rig: backend {args.backend}, axes {', '.join(axes)}", file=sys.stderr)
-    with session.sigterm_as_interrupt():
-        result = run_rig(
-            args.backend,
-            spec,
-            rig,
-            duration_s=args.duration or None,
-            out_dir=args.out,
-            echo=echo | {"hold": hold},
-            hold=hold,
-        )
+    result = run_rig(
+        args.backend,
+        spec,
+        rig,
+        duration_s=args.duration or None,
+        out_dir=args.out,
+        echo=echo | {"hold": hold},
+        hold=hold,
+    )
     d = result.diagnostics
     if result.error is not None and d["cycles"] == "0":  # the DAQ never opened
         print(f"pneu rig: error: {result.error}", file=sys.stderr)

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 
+from pneu_msgs_py.lifecycle import exits, signals
 from pneu_sim.cli import live_options
 
 from pneu_control.experiment import session
@@ -27,9 +29,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="reference for the active axes in paper units, e.g. sine:amplitude=20,frequency_hz=0.25 "
         "or constant:value=800 or smooth_step:target=38.2,duration_s=4",
     )
-    p.add_argument("--duration", type=float, default=20.0, metavar="S", help="simulated seconds")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=20.0,
+        metavar="S",
+        help="simulated seconds, [0.01, 600] (the duration cap of every command)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="noise seed, an integer in [0, 2^32 - 1]")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="run directory: new or empty (or --overwrite); gets run.mcap, metrics.json, "
+        "timeseries.npz",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the pneu outputs of a previous run in DIR (other files are left alone)",
+    )
     p.add_argument(
         "--set",
         action="append",
@@ -72,6 +91,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
+    # everything is checked before anything is written: the output first (cheap), then
+    # every file and option, the references against the rig's limits, the faults
+    claim = session.run_dir(
+        args.out, overwrite=args.overwrite, inputs=(args.plant, args.controllers, args.safety)
+    ).check()
     spec = session.build_spec(
         axes=axes,
         controller=args.controller,
@@ -90,36 +114,43 @@ def run(args: argparse.Namespace) -> int:
     )
     live = live_options.open_live(args, axes=axes, kind=args.axis)
     try:
-        result = session.execute(spec, args.out, bag=not args.no_bag, progress=True, live=live)
+        result = session.execute(spec, claim, bag=not args.no_bag, progress=True, live=live)
     finally:
         if live is not None:
             live.close()
     for axis, m in result.metrics.items():
-        print(
-            f"{axis:7s} {result.algorithms[axis]:10s} e_max = {m.e_max:8.4f} {m.unit}   "
-            f"RMSE = {m.rmse:8.4f} {m.unit}   window {m.window_start_s:.2f}–{m.window_end_s:.2f} s"
-        )
+        print(m.line(result.algorithms[axis]))
     for iv in result.fault_intervals:
         if iv.kind == "injected":
             print(f"fault   {iv.axis:7s} {iv.cause} injected {iv.start_s:.3f}–{iv.end_s:.3f} s")
     for axis, st in _final_status(result).items():
         print(f"safety  {axis:7s} {st}")
+    end = result.end
+    if result.interrupted:
+        print(
+            f"interrupted by {end.get('signal') or 'SIGINT'} at {end['last_sample_s']:.3f} s of "
+            f"{spec.duration_s:g} s: the bag and the metrics of what ran are complete "
+            "(interrupted: true)",
+            file=sys.stderr,
+        )
     print(f"wrote {args.out}/metrics.json  (rtf {result.rtf:.0f}x)", file=sys.stderr)
-    return 130 if result.interrupted else 0
+    if result.interrupted:
+        return exits.interrupted_code(signals.pending() or signal.SIGINT)
+    return exits.SAFETY_STOP if result.safety_stopped else exits.OK
 
 
 def _final_status(result) -> dict[str, str]:
-    """Per active axis: SAFE (since when, why) or OK at the end of the run."""
+    """Per active axis: SAFE (since when, why), TRIPPED (a fault was detected) or OK."""
     out = {}
     for axis in result.spec.axes:
-        safe = [
-            iv
-            for iv in result.fault_intervals
-            if iv.kind == "safe" and iv.axis == axis and iv.end_s == float("inf")
-        ]
-        out[axis] = (
-            f"SAFE at the end (valve 5 V since {safe[0].start_s:.3f} s: {safe[0].cause})"
-            if safe
-            else ("OK" if result.spec.safety is not None else "no supervisor")
-        )
+        safe = [iv for iv in result.fault_intervals if iv.kind == "safe" and iv.axis == axis]
+        at_end = [iv for iv in safe if iv.end_s == float("inf")]
+        if at_end:
+            out[axis] = (
+                f"SAFE at the end (valve 5 V since {at_end[0].start_s:.3f} s: {at_end[0].cause})"
+            )
+        elif safe:
+            out[axis] = f"TRIPPED at {safe[0].start_s:.3f} s ({safe[0].cause}), recovered"
+        else:
+            out[axis] = "OK" if result.spec.safety is not None else "no supervisor"
     return out

@@ -126,7 +126,9 @@ def run(args: argparse.Namespace) -> int:
             )
         ]
     else:
-        exps = [experiment_by_id(i) for i in args.experiment] or list(PAPER_EXPERIMENTS)
+        exps = [experiment_by_id(i, "--experiment") for i in args.experiment] or list(
+            PAPER_EXPERIMENTS
+        )
     t0 = time.perf_counter()
     plan = plan_sweep(
         samples=args.samples,

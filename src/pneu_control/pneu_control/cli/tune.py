@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import yaml
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.outputs import OutputFile
 from pneu_msgs_py.params.core import to_dict
+from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.cli.progress import counted, progress_bar
 from pneu_control.controller.params import load_controller_params
@@ -23,7 +25,13 @@ ALGORITHMS = ("pid", "ladrc", "eso_smc")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", required=True, metavar="YAML", help="retuned params file to write")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="YAML",
+        help="retuned params file to write (new, or --overwrite; never the --controllers file)",
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace the file if it exists")
     p.add_argument("--plant", default=None, metavar="FILE")
     p.add_argument("--controllers", default=None, metavar="FILE", help="the paper's gains (base)")
     p.add_argument("--axis", choices=("linear", "rotary", "both"), default="both")
@@ -50,10 +58,22 @@ def retuned_document(
 
 
 def run(args: argparse.Namespace) -> int:
+    from pneu_msgs_py.params.paths import config_file
     from pneu_sim.physics.plant_file import load_plant
 
-    plant = load_plant(args.plant)
+    base = args.controllers or config_file("controllers.yaml")
+    claim = OutputFile(
+        args.out,
+        overwrite=args.overwrite,
+        inputs=[base, args.plant or config_file("plant.yaml")],
+        suffixes=(".yaml", ".yml"),
+    ).check()
+    with from_option("--plant" if args.plant else None):
+        plant = load_plant(args.plant)
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
+    for axis in axes:  # the base file is read (strictly) before the long search
+        with from_option("--controllers" if args.controllers else None):
+            load_controller_params(axis, args.controllers)
     algorithms = tuple(args.algorithm) or ALGORITHMS
     results: dict[str, dict[str, Any]] = {}
     notes: list[str] = []
@@ -81,8 +101,8 @@ def run(args: argparse.Namespace) -> int:
         params = load_controller_params(axis, args.controllers, merged)
         results[axis] = to_dict(params)
     bar.close()
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(retuned_document(results, {}, notes))
-    print(f"wrote {out} in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+    with signals.deferred(), claim:
+        claim.partial.write_text(retuned_document(results, {}, notes))
+        claim.publish()
+    print(f"wrote {claim.path} in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     return 0

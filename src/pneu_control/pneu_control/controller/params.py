@@ -26,7 +26,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pneu_msgs_py.params.core import ParamError, flatten, from_dict, param, with_updates
+from pneu_msgs_py.params.core import (
+    MISSING,
+    ParamError,
+    flatten,
+    from_dict,
+    param,
+    with_updates,
+)
+from pneu_msgs_py.params.yaml_file import load_yaml, located
 
 from pneu_control.algorithms import EsoSmcParams, EsoSmcPlusParams, LadrcParams, PidParams
 
@@ -75,10 +83,11 @@ class LimitsParams:
 
     def _check(self) -> None:
         if not self.u_min < self.u_neutral < self.u_max:
+            # a relation of three fields: name all three (whichever the user changed)
             raise ParamError(
-                "u_neutral",
-                self.u_neutral,
-                f"strictly between u_min = {self.u_min:g} V and u_max = {self.u_max:g} V",
+                "u_min/u_neutral/u_max",
+                f"{self.u_min:g}/{self.u_neutral:g}/{self.u_max:g} V",
+                "u_min < u_neutral < u_max (the closed centre strictly inside the range)",
             )
 
 
@@ -97,7 +106,16 @@ class ReferenceParams:
 
     kind: str = param("sine", choices=REFERENCE_KINDS, desc="reference type")
     amplitude: float = param(20.0, unit="mm | rpm", desc="sine amplitude", source="paper")
-    frequency_hz: float = param(0.25, unit="Hz", desc="sine frequency", lo=0.0, source="paper")
+    frequency_hz: float = param(
+        0.25,
+        unit="Hz",
+        desc="sine frequency",
+        lo=0.0,
+        lo_open=True,
+        allowed="(0, 1/(2·sample_time_s)) Hz: above 0 and below the Nyquist frequency "
+        "(500 Hz at the paper's T = 1 ms)",
+        source="paper",
+    )
     offset: float = param(0.0, unit="mm | rpm", desc="sine offset; start of smooth_step and ramp")
     target: float = param(
         120.0 / math.pi, unit="mm | rpm", desc="smooth_step end value", source="paper Eq. 38"
@@ -115,8 +133,6 @@ class ReferenceParams:
     t0_s: float = param(0.0, unit="s", desc="start time; the reference holds before it", lo=0.0)
 
     def _check(self) -> None:
-        if self.kind == "sine" and self.frequency_hz <= 0.0:
-            raise ParamError("frequency_hz", self.frequency_hz, "(0, Nyquist) Hz for a sine")
         if self.kind == "smooth_step" and self.duration_s <= 0.0:
             raise ParamError("duration_s", self.duration_s, "(0, inf) s for a smooth_step")
         if self.kind == "waypoints" and not self.file:
@@ -206,7 +222,7 @@ class AxisControllerParams:
             raise ParamError(
                 "reference.frequency_hz",
                 self.reference.frequency_hz,
-                f"[0, {f_nyq:g}) Hz (below Nyquist 1/(2T) at T = {T:g} s)",
+                f"(0, {f_nyq:g}) Hz (below the Nyquist frequency 1/(2T) at T = {T:g} s)",
             )
         if self.td.h < T * (1.0 - 1e-9):
             raise ParamError("td.h", self.td.h, f"[{T:g}, inf) s (at least the sample time)")
@@ -260,19 +276,20 @@ def _find_controllers_yaml() -> Path:
 def _section(data: Any, axis: str, path: Path) -> Mapping[str, Any]:
     key = f"{axis}_controller"
     if not isinstance(data, Mapping) or key not in data:
-        raise ParamError(key, None, f"a top-level '{key}:' section in {path}")
+        raise ParamError(key, MISSING, f"a top-level '{key}:' section")
     node = data[key]
     if not isinstance(node, Mapping) or "ros__parameters" not in node:
-        raise ParamError(f"{key}.ros__parameters", None, f"a 'ros__parameters:' mapping in {path}")
+        raise ParamError(f"{key}.ros__parameters", MISSING, "a 'ros__parameters:' mapping")
     params = node["ros__parameters"]
     if not isinstance(params, Mapping):
         raise ParamError(f"{key}.ros__parameters", params, "a mapping")
     return params
 
 
-def params_from_mapping(data: Mapping[str, Any]) -> AxisControllerParams:
-    """Build from a nested (YAML-shaped) mapping; missing keys take defaults."""
-    return from_dict(AxisControllerParams, data, strict=False)
+def params_from_mapping(data: Mapping[str, Any], *, strict: bool = False) -> AxisControllerParams:
+    """Build from a nested (YAML-shaped) mapping; ``strict``: every key required (a file),
+    else missing keys take defaults (parameters a node reported)."""
+    return from_dict(AxisControllerParams, data, strict=strict)
 
 
 def load_controller_params(
@@ -282,18 +299,19 @@ def load_controller_params(
 ) -> AxisControllerParams:
     """Read ``<axis>_controller.ros__parameters`` of ``path`` (default config/controllers.yaml).
 
+    The file is read strictly (:mod:`pneu_msgs_py.params.yaml_file`): every
+    parameter of the section must be there, none unknown, none twice.
+
     ``overrides`` are dotted names (``"eso_smc.epsilon": 900``) applied on top
     and validated with the file's values as one set; the reference (and its
     waypoint file) is checked by building it.
     """
-    import yaml
-
     if axis not in ("linear", "rotary"):
         raise ParamError("axis", axis, "one of linear, rotary")
     p = Path(path) if path is not None else _find_controllers_yaml()
-    with open(p, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
-    params = params_from_mapping(_section(data, axis, p))
+    data = load_yaml(p)
+    with located(p, data, f"{axis}_controller.ros__parameters"):
+        params = params_from_mapping(_section(data, axis, p), strict=True)
     if overrides:
         params = with_updates(params, dict(overrides))
     from pneu_control.controller.references import make_reference

@@ -217,10 +217,9 @@ def load_waypoints(file: str, key: str = "reference.file") -> tuple[list[float],
         raise ParamError(key, file, "an existing CSV or YAML waypoint file")
     rows: list[tuple[object, object]] = []
     if path.suffix.lower() in (".yaml", ".yml"):
-        import yaml
+        from pneu_msgs_py.params.yaml_file import load_yaml
 
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
+        data = load_yaml(path)
         if isinstance(data, dict) and "points" in data:
             data = data["points"]
         if isinstance(data, dict) and "t" in data and "value" in data:

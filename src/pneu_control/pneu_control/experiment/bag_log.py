@@ -13,6 +13,7 @@ from pneu_control.controller.axis import STATE_FIELDS
 
 __all__ = [
     "EXCITE_METADATA",
+    "END_METADATA",
     "FAULTS_METADATA",
     "INTERVALS_METADATA",
     "RUN_METADATA",
@@ -26,6 +27,19 @@ SAFETY_METADATA = "pneu.safety"  # supervisor on/off, its thresholds, allow_unsa
 FAULTS_METADATA = "pneu.faults"  # the injected faults (written at the start)
 INTERVALS_METADATA = "pneu.fault_intervals"  # injected + safe intervals (written at the end)
 EXCITE_METADATA = "pneu.excite"  # excitation design per axis (pneu_control.sysid)
+END_METADATA = "pneu.end"  # how the run ended: completed / interrupted (signal, time) / failed
+
+
+def end_metadata(end: dict[str, Any]) -> dict[str, str]:
+    """``pneu.end`` (last record of a finished bag): the run's end as strings.
+
+    A bag of a pneu run without it was cut short (process killed): ``pneu analyze``
+    says so, ``pneu recover`` rebuilds its index.
+    """
+    out = {}
+    for k, v in end.items():
+        out[k] = ("true" if v else "false") if isinstance(v, bool) else str(v)
+    return out
 
 
 def safety_metadata(echo: dict[str, Any]) -> dict[str, str]:

@@ -91,9 +91,11 @@ PAPER_EXPERIMENTS: tuple[Experiment, ...] = (
 )
 
 
-def experiment_by_id(exp_id: str) -> Experiment:
+def experiment_by_id(exp_id: str, field: str = "--only") -> Experiment:
     for exp in PAPER_EXPERIMENTS:
         if exp.id == exp_id:
             return exp
+    from pneu_msgs_py.params.core import ParamError
+
     known = ", ".join(e.id for e in PAPER_EXPERIMENTS)
-    raise ValueError(f"experiment: {exp_id!r} refused; allowed: one of {known}")
+    raise ParamError(field, exp_id, f"one of {known}")

@@ -175,7 +175,7 @@ def warm_up() -> float:
         axes=AXES,
         controllers={axis: AxisControllerParams() for axis in AXES},
         plant=PlantParams(),
-        duration_s=0.002,
+        duration_s=0.01,  # the shortest run the duration cap allows (lifecycle.duration)
     )
     run_compiled(spec, fallback=False)
     return time.perf_counter() - t0

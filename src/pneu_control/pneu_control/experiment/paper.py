@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -254,8 +255,12 @@ def write_table(
     doc = {"experiments": [r.to_dict() for r in rows]}
     if extra:
         doc.update(extra)
-    (out / "paper_table.json").write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
-    (out / "paper_table.md").write_text(render_markdown(rows))
+    for name, text in (
+        ("paper_table.json", json.dumps(doc, indent=2, sort_keys=True) + "\n"),
+        ("paper_table.md", render_markdown(rows)),
+    ):
+        (out / f"{name}.partial").write_text(text)  # renamed when complete
+        os.replace(out / f"{name}.partial", out / name)
 
 
 def paper_rows(path: str | Path) -> list[dict[str, Any]]:

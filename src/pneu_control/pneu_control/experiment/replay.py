@@ -20,7 +20,7 @@ from pneu_msgs_py.bag.errors import MissingTopicError
 from pneu_msgs_py.bag.reader import RunData, read_run
 from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.contract.topics import JOINT_STATE_TOPIC, PRESSURE_TOPICS, ROTARY_COUNTS_JOINT
-from pneu_msgs_py.params.core import from_dict
+from pneu_msgs_py.params.core import ParamError, from_dict
 
 from pneu_control.analysis.run_analysis import _axes_in, run_config
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
@@ -119,7 +119,10 @@ def replay(
         params = base_params(config, axis, controllers_file)
         upd = dict((overrides or {}).get(axis, {}))
         if upd:
-            params = with_updates(params, upd)
+            try:
+                params = with_updates(params, upd)
+            except ParamError as err:  # named as the user wrote it: --set linear.td.r=...
+                raise ParamError(f"{axis}.{err.key}", err.value, err.allowed) from None
         used[axis] = params
         ctrls[axis] = AxisController(axis, params)
     from pneu_msgs_py.params.core import to_dict
@@ -135,11 +138,22 @@ def replay(
             "open_loop": "true",
         }
     }
-    with BagWriter(out, metadata=meta, controller_state_fields=STATE_FIELDS) as w:
-        for s in samples:
-            w.write_sample(s)
-            for axis, c in ctrls.items():
-                u = c.update(s)
-                w.write_command(axis, s.stamp_ns, u)
-                w.write_controller_state(axis, s.stamp_ns, c.state_values(), c.algorithm)
+    from pneu_msgs_py.lifecycle import signals
+
+    w = BagWriter(out, metadata=meta, controller_state_fields=STATE_FIELDS)
+    sig = signals.STATE
+    try:
+        with signals.deferred():  # a signal stops at the next sample; no half-written bag
+            for s in samples:
+                if sig.pending is not None:
+                    raise signals.Interrupted(sig.pending)
+                w.write_sample(s)
+                for axis, c in ctrls.items():
+                    u = c.update(s)
+                    w.write_command(axis, s.stamp_ns, u)
+                    w.write_controller_state(axis, s.stamp_ns, c.state_values(), c.algorithm)
+    except BaseException:
+        w.discard()  # an offline product: remade by running the command again
+        raise
+    w.close()
     return used

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -24,7 +25,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pneu_msgs_py.contract.samples import AXES, SensorSample
+from pneu_msgs_py.contract.samples import AXES
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.duration import check_duration
 from pneu_sim.cycle.rig_cycle import RigCycle
 from pneu_sim.physics.plant import Plant
 
@@ -65,8 +68,7 @@ class RunSpec:
                 raise ValueError(f"axis: {axis!r} refused; allowed: one of {AXES}")
             if axis not in self.controllers:
                 raise ValueError(f"controllers: no controller parameters for axis {axis!r}")
-        if not (self.duration_s > 0.0 and math.isfinite(self.duration_s)):
-            raise ValueError(f"duration: {self.duration_s!r} refused; allowed: (0, inf) s")
+        check_duration(self.duration_s, "duration_s")
 
 
 @dataclass
@@ -86,19 +88,25 @@ class RunResult:
     safety_events: list[Any] = field(default_factory=list)  # SafetyEvent, in order
     fault_intervals: list[Any] = field(default_factory=list)  # fault_marks.FaultInterval
     safety_counters: dict[str, int] = field(default_factory=dict)
+    end: dict[str, Any] = field(default_factory=dict)  # how it ended (session.end_record)
+
+    @property
+    def safety_stopped(self) -> bool:
+        """Did the supervisor take an axis safe, or detect a fault (an ERROR event)?"""
+        return any(e.level == "ERROR" for e in self.safety_events)
 
     @property
     def rtf(self) -> float:
         """Simulated seconds per wall-clock second."""
-        return (
-            float(self.t[-1] + self.t[1] - self.t[0]) / self.wall_s if self.wall_s > 0 else math.inf
-        )
+        simulated = len(self.t) * self.spec.plant.sim.T
+        return simulated / self.wall_s if self.wall_s > 0 else math.inf
 
     def metrics_dict(self) -> dict[str, Any]:
         return {axis: m.to_dict() for axis, m in self.metrics.items()}
 
     def save(self, out_dir: str | Path, config_echo: dict[str, Any] | None = None) -> Path:
-        """Write ``metrics.json`` and ``timeseries.npz`` into ``out_dir``."""
+        """Write ``metrics.json`` and ``timeseries.npz`` into ``out_dir`` (as ``.partial``, renamed
+        when complete)."""
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         doc = {
@@ -108,23 +116,60 @@ class RunResult:
             "duration_s": self.spec.duration_s,
             "seed": self.spec.seed,
             "interrupted": self.interrupted,
+            "end": self.end,
+            "safety_stopped": self.safety_stopped,
             "metrics": self.metrics_dict(),
             "units": {"linear": "mm", "rotary": "rpm"},
             "config": config_echo or {},
             "fault_intervals": [iv.to_dict() for iv in self.fault_intervals],
             "safety_counters": self.safety_counters,
         }
-        (out / "metrics.json").write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
+        part = out / "metrics.json.partial"
+        part.write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
         arrays = {"t": self.t}
         arrays.update({f"sample.{k}": v for k, v in self.samples.items()})
         for axis, cols in self.axes.items():
             arrays.update({f"{axis}.{k}": v for k, v in cols.items()})
-        with open(out / "timeseries.npz", "wb") as fh:
+        with open(out / "timeseries.npz.partial", "wb") as fh:
             np.savez(fh, **arrays)
+        os.replace(part, out / "metrics.json")
+        os.replace(out / "timeseries.npz.partial", out / "timeseries.npz")
         return out
 
 
 RUNNER_NODE = "pneu_runner"  # the node name in /diagnostics status names
+
+
+class _Rows:
+    """Rows of floats recorded per cycle into an array preallocated for the whole run.
+
+    Rows are gathered in a short list and copied in blocks (a numpy row write
+    per cycle costs ten times a list append), so memory is the array plus one
+    block, and :meth:`rows` always returns whole rows only.
+    """
+
+    BLOCK = 4096
+
+    def __init__(self, n: int, width: int) -> None:
+        self.arr = np.empty((n, width), dtype=float)
+        self.buf: list[tuple[float, ...]] = []
+        self.n = 0  # rows copied into arr
+        self.append = self.buf.append
+
+    def flush(self) -> None:
+        if self.buf:
+            k = len(self.buf)
+            self.arr[self.n : self.n + k] = self.buf
+            self.n += k
+            self.buf.clear()
+
+    def rows(self, m: int) -> np.ndarray:
+        """The first ``m`` rows (``m`` ≤ rows appended)."""
+        self.flush()
+        return self.arr[:m]
+
+    def __len__(self) -> int:
+        return self.n + len(self.buf)
 
 
 def _diag(events: list[Any]) -> list[Any]:
@@ -165,22 +210,25 @@ def run(
     controller escapes: the controller is treated as crashed (silent) from
     then on and the supervisor's watchdog takes its axis safe.
 
-    A KeyboardInterrupt stops the loop cleanly: the result holds what ran
-    (``interrupted=True``) and the caller still closes the bag.
+    A signal recorded by :mod:`pneu_msgs_py.lifecycle.signals` (polled once per
+    cycle) or a KeyboardInterrupt stops the loop cleanly: the result holds the
+    cycles that ran completely (``interrupted=True``) and the caller still
+    closes the bag. Memory is preallocated for the run's duration (capped by
+    :mod:`pneu_msgs_py.lifecycle.duration`).
     """
     plant = Plant(spec.plant, seed=spec.seed)
     period = plant.T
     n = int(round(spec.duration_s / period))
     ctrls = {axis: _controller(axis, spec.controllers[axis], period) for axis in spec.axes}
-    rec_samples: list[SensorSample] = []
-    rec_state: dict[str, list[tuple[float, ...]]] = {axis: [] for axis in ctrls}
-    rec_u: dict[str, list[float]] = {axis: [] for axis in ctrls}
+    # per cycle: (stamp, SAMPLE_FIELDS...); per axis: (STATE_FIELDS..., u); what the DAQ held
+    rec_samples = _Rows(n, 1 + len(SAMPLE_FIELDS))
+    rec_axis = {axis: _Rows(n, len(STATE_FIELDS) + 1) for axis in ctrls}
     # (axis, core, its records), fixed order
-    active = [(axis, ctrls[axis], rec_state[axis], rec_u[axis]) for axis in AXES if axis in ctrls]
-    rec_out: list[tuple[float, float]] = []  # what the DAQ held during each step
-    rec_truth: list[tuple[float, float]] = []  # (x, omega) true, only with faults
+    active = [(axis, ctrls[axis], rec_axis[axis].append) for axis in AXES if axis in ctrls]
+    rec_out = _Rows(n, 2)  # what the DAQ held during each step
     algorithms = {axis: c.algorithm for axis, c in ctrls.items()}
-    nan_state = (math.nan,) * len(STATE_FIELDS)
+    nan_row = (math.nan,) * (len(STATE_FIELDS) + 1)
+    sig = signals.STATE
 
     sup = None
     if spec.safety is not None:
@@ -191,6 +239,7 @@ def run(
         plant, axes=spec.axes, x0=spec.x0, supervisor=sup, faults=spec.faults, seed=spec.seed
     )
     faulty = cycle.injector is not None
+    rec_truth = _Rows(n if faulty else 0, 2)  # (x, omega) true, only with faults
     events_all: list[Any] = []
     crashed: dict[str, str] = {}
 
@@ -214,16 +263,21 @@ def run(
     interrupted = False
     report_every = max(1, int(round(1.0 / period)))  # once per simulated second
     t_wall = time.perf_counter()
-    k = 0
+    m = 0  # cycles recorded completely
+    append_sample, append_out, append_truth = rec_samples.append, rec_out.append, rec_truth.append
+    recorders = [rec_samples, rec_out, rec_truth, *rec_axis.values()]
     try:
         for k in range(n):
+            if sig.pending is not None:  # SIGINT/SIGTERM/SIGHUP under signals.deferred()
+                interrupted = True
+                break
             stamp = s.stamp_ns
             if faulty:
                 st = plant.state
-                rec_truth.append((st.x, st.omega))
-            rec_samples.append(s)
+                append_truth((st.x, st.omega))
+            append_sample((stamp, s.p_c1, s.p_c2, s.p_m1, s.x, s.theta, s.omega, s.counts))
             answers = []  # (axis, u, state values, algorithm) for the bag, in axis order
-            for axis, ctrl, rec_st, rec_u_ in active:
+            for axis, ctrl, append_axis in active:
                 u = None
                 if not (axis in crashed or cycle.silent(axis)):
                     try:
@@ -231,13 +285,11 @@ def run(
                     except Exception as err:  # a crashed controller must not stop the rig
                         controller_failed(axis, err, stamp)
                 if u is None:  # silent or crashed: no command this cycle
-                    rec_st.append(nan_state)
-                    rec_u_.append(math.nan)
+                    append_axis(nan_row)
                 else:
                     values = ctrl.state_values()
                     u = cycle.command(axis, u)
-                    rec_st.append(values)
-                    rec_u_.append(u)
+                    append_axis((*values, u))
                     if bag is not None:
                         answers.append((axis, u, values, ctrl.algorithm))
             if bag is not None:
@@ -248,31 +300,36 @@ def run(
                     events_all.extend(events)
                     if bag is not None:
                         bag.write_diagnostics(stamp, _diag(events))
-            rec_out.append(cycle.held_pair)
+            append_out(cycle.held_pair)
+            m = k + 1
+            if not m % _Rows.BLOCK:
+                for r in recorders:
+                    r.flush()
             s = cycle.advance()  # tick k -> k+1 under u_{k-1}
             if progress is not None and k % report_every == 0:
                 progress(k * period)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
+        if isinstance(err, signals.Interrupted) and sig.defer == 0:
+            raise  # the caller did not defer signals (tune, paper's extra seeds): it stops too
         interrupted = True
     wall = time.perf_counter() - t_wall
 
-    m = len(rec_samples)
-    t = np.array([rs.stamp_ns for rs in rec_samples], dtype=np.int64) * 1e-9
-    samples = {
-        name: np.array([getattr(rs, name) for rs in rec_samples], dtype=float)
-        for name in SAMPLE_FIELDS
-    }
+    # whole cycles only (an exception between two records of a cycle drops that cycle)
+    m = min(m, len(rec_samples), len(rec_out), *(len(r) for r in rec_axis.values()))
+    srows = rec_samples.rows(m)
+    t = srows[:, 0].astype(np.int64) * 1e-9
+    samples = {name: srows[:, 1 + i].copy() for i, name in enumerate(SAMPLE_FIELDS)}
     axes: dict[str, dict[str, np.ndarray]] = {}
     for axis in ctrls:
-        block = np.array(rec_state[axis][:m], dtype=float).reshape(m, len(STATE_FIELDS))
-        cols = {name: block[:, i] for i, name in enumerate(STATE_FIELDS)}
-        cols["u"] = np.array(rec_u[axis][:m], dtype=float)
+        block = rec_axis[axis].rows(m)
+        cols = {name: block[:, i].copy() for i, name in enumerate(STATE_FIELDS)}
+        cols["u"] = block[:, len(STATE_FIELDS)].copy()
         axes[axis] = cols
-    out = np.array(rec_out[:m], dtype=float).reshape(m, 2)
+    out = rec_out.rows(m)
     truth = {}
-    if rec_truth:
-        tr = np.array(rec_truth[:m], dtype=float).reshape(-1, 2)
-        truth = {"x": tr[:, 0], "omega": tr[:, 1]}
+    if faulty and m:
+        tr = rec_truth.rows(min(m, len(rec_truth)))
+        truth = {"x": tr[:, 0].copy(), "omega": tr[:, 1].copy()}
     return result_of(
         spec,
         t,

@@ -6,23 +6,44 @@ point resolves config files, overrides and steady-state windows the same way.
 
 from __future__ import annotations
 
-import contextlib
-import signal
 import sys
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.duration import check_duration
+from pneu_msgs_py.lifecycle.outputs import OutputDir
 from pneu_msgs_py.live.sink import Tee
 from pneu_msgs_py.params.core import ParamError, to_dict
 from pneu_msgs_py.params.spec import parse_spec, parse_value
+from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.analysis.metrics import WindowSpec
 from pneu_control.controller.params import load_controller_params
 from pneu_control.experiment.runner import RunResult, RunSpec, run
 
-__all__ = ["build_spec", "execute", "parse_reference", "parse_sets", "window_for"]
+__all__ = [
+    "RUN_ARTEFACTS",
+    "build_spec",
+    "check_seed",
+    "execute",
+    "parse_reference",
+    "parse_sets",
+    "run_dir",
+    "window_for",
+]
+
+RUN_ARTEFACTS = ("run.mcap", "metrics.json", "timeseries.npz")
+SEED_MAX = 2**32 - 1
+
+
+def check_seed(seed: object, field: str = "--seed") -> int:
+    """A seed is an integer in [0, 2^32 - 1] (numpy's SeedSequence takes it whole)."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= SEED_MAX:
+        raise ParamError(field, seed, f"an integer in [0, {SEED_MAX}]")
+    return seed
 
 
 def parse_sets(items: Iterable[str], axes: tuple[str, ...]) -> dict[str, dict[str, Any]]:
@@ -31,13 +52,13 @@ def parse_sets(items: Iterable[str], axes: tuple[str, ...]) -> dict[str, dict[st
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key:
-            raise ValueError(f"--set: {item!r} refused; allowed: KEY=VALUE")
+            raise ParamError("--set", item, "KEY=VALUE, e.g. eso_smc.epsilon=900")
         head, _, rest = key.partition(".")
         targets = axes
         if head in ("linear", "rotary"):
             if head not in axes:
-                raise ValueError(
-                    f"--set {key}: axis {head!r} is not active (active: {', '.join(axes)})"
+                raise ParamError(
+                    f"--set {key}", value, f"a key of an active axis ({', '.join(axes)})"
                 )
             targets, key = (head,), rest
         for axis in targets:
@@ -95,11 +116,27 @@ def build_spec(
     ``faults``: ``NAME[:k=v,...]`` strings, dicts or :class:`pneu_sim.faults.injection.FaultSpec`.
     ``safety``: True (default) = the supervisor with ``safety_file`` (default
     ``config/safety.yaml``); False = no supervisor; or a ``SafetyParams``.
+
+    Everything is checked here, before anything is written: every file and
+    option, the references against the stroke and speed limits and the faults
+    against the run (:mod:`pneu_control.experiment.checks`).
     """
     from pneu_sim.faults.injection import parse_faults
     from pneu_sim.physics.plant_file import load_plant
 
-    plant_params = plant if plant is not None else load_plant(plant_file)
+    from pneu_control.controller.params import ALGORITHMS
+    from pneu_control.experiment.checks import check_faults, check_references
+
+    duration_s = check_duration(duration_s, "--duration")
+    if controller is not None and controller not in ALGORITHMS:
+        raise ParamError("--controller", controller, "one of " + ", ".join(ALGORITHMS))
+    seed = check_seed(seed)
+    if window_start_s is not None and not (
+        isinstance(window_start_s, (int, float)) and 0.0 <= window_start_s < duration_s
+    ):
+        raise ParamError("--window-start", window_start_s, f"[0, {duration_s:g}) s: inside the run")
+    with from_option("--plant" if plant_file else None):
+        plant_params = plant if plant is not None else load_plant(plant_file)
     per_axis = parse_sets(sets, axes)
     ref = reference if isinstance(reference, dict) else parse_reference(reference)
     controllers: dict[str, Any] = {}
@@ -109,9 +146,11 @@ def build_spec(
         if controller:
             overrides["algorithm"] = controller
         overrides.update(per_axis[axis])
+        with from_option("--controllers" if controllers_file else None):
+            load_controller_params(axis, controllers_file)  # the file's errors, located in it
         try:
             params = load_controller_params(axis, controllers_file, overrides)
-        except ParamError as err:
+        except ParamError as err:  # an override's: named with its axis
             raise ParamError(f"{axis}.{err.key}", err.value, err.allowed) from None
         controllers[axis] = params
         windows[axis] = window_for(axis, params.reference, window_start_s)
@@ -119,12 +158,14 @@ def build_spec(
     if safety is True:
         from pneu_driver.safety import load_safety_params
 
-        safety_params = load_safety_params(safety_file)
+        with from_option("--safety" if safety_file else None):
+            safety_params = load_safety_params(safety_file)
     elif safety is False or safety is None:
         safety_params = None
     else:
         safety_params = safety
-    return RunSpec(
+    check_faults(fault_specs, axes, duration_s)
+    spec = RunSpec(
         axes=axes,
         controllers=controllers,
         plant=plant_params,
@@ -136,6 +177,8 @@ def build_spec(
         safety=safety_params,
         include_faults=include_faults,
     )
+    check_references(spec, "--reference" if reference else None)
+    return spec
 
 
 def config_echo(spec: RunSpec) -> dict[str, Any]:
@@ -160,24 +203,6 @@ def config_echo(spec: RunSpec) -> dict[str, Any]:
     }
 
 
-@contextlib.contextmanager
-def sigterm_as_interrupt() -> Iterator[None]:
-    """SIGTERM behaves like Ctrl-C so the bag is finalised either way."""
-
-    def handler(signum, frame):
-        raise KeyboardInterrupt
-
-    try:
-        old = signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
-
-
 def _progress_printer(total_s: float, label: str):
     start = time.monotonic()
     last = [start]
@@ -191,44 +216,99 @@ def _progress_printer(total_s: float, label: str):
     return report
 
 
+def run_dir(
+    out_dir: str | Path,
+    *,
+    overwrite: bool = False,
+    inputs: Iterable[str | Path | None] = (),
+    bag_name: str = "run.mcap",
+) -> OutputDir:
+    """The claim on a run directory (:mod:`pneu_msgs_py.lifecycle.outputs`); ``.check()`` it early."""
+    return OutputDir(
+        out_dir, (bag_name, "metrics.json", "timeseries.npz"), overwrite=overwrite, inputs=inputs
+    )
+
+
+def end_record(result: RunResult) -> dict[str, Any]:
+    """How the run ended: ``completed`` or ``interrupted`` (by which signal, when, how far)."""
+    n = len(result.t)
+    sig = signals.pending()
+    return {
+        "status": "interrupted" if result.interrupted else "completed",
+        "interrupted": result.interrupted,
+        "signal": signals.signal_name(sig) if (result.interrupted and sig) else "",
+        "interrupted_utc": signals.pending_since() if result.interrupted else "",
+        "last_sample_s": float(result.t[-1]) if n else 0.0,
+        "samples": n,
+        "planned_samples": int(round(result.spec.duration_s / result.spec.plant.sim.T)),
+    }
+
+
 def execute(
     spec: RunSpec,
-    out_dir: str | Path,
+    out_dir: str | Path | OutputDir,
     *,
     bag: bool = True,
     progress: bool = False,
     bag_name: str = "run.mcap",
+    overwrite: bool = False,
     live: Any | None = None,
     echo_overrides: dict[str, Any] | None = None,
 ) -> RunResult:
-    """Run ``spec``, write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP.
+    """Run ``spec``; write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP bag.
+
+    The run directory is claimed first (:func:`run_dir`: refused if it holds
+    files, unless ``overwrite``; locked). Files are written under ``.partial``
+    names and renamed when complete. SIGINT, SIGTERM and SIGHUP stop the loop
+    at the next cycle; the bag and the metrics of what ran are then finished
+    with ``interrupted: true`` (``pneu.end`` metadata, metrics.json). A signal
+    before the first sample leaves nothing behind and raises
+    :class:`~pneu_msgs_py.lifecycle.signals.Interrupted`.
 
     ``live``: a :class:`pneu_msgs_py.live.server.LiveServer` that gets every cycle
     too (after the bag); the caller closes it. ``echo_overrides`` replace entries of
     the recorded config (e.g. a blind identification study hides the twin's parameters).
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    claim = (
+        out_dir
+        if isinstance(out_dir, OutputDir)
+        else run_dir(out_dir, overwrite=overwrite, bag_name=bag_name)
+    )
     echo = {**config_echo(spec), **(echo_overrides or {})}
     report = _progress_printer(spec.duration_s, spec.name) if progress else None
-    with sigterm_as_interrupt():
-        if bag:
+    with signals.deferred(), claim:
+        writer = None
+        try:
+            signals.raise_if_pending()
+            if bag:
+                from pneu_control.experiment.bag_log import open_run_bag
+
+                writer = open_run_bag(claim.final(bag_name), spec, echo)
+            sink = writer if live is None else (live if writer is None else Tee(writer, live))
+            result = run(spec, bag=sink, progress=report)
+            if result.interrupted and len(result.t) == 0:
+                raise signals.Interrupted(signals.pending() or 2)
+        except BaseException as err:
+            if writer is not None:
+                _abandon(writer, err)
+            claim.discard()
+            raise
+        result.end = end_record(result)
+        if writer is not None:
             from pneu_control.experiment.bag_log import (
+                END_METADATA,
                 INTERVALS_METADATA,
+                end_metadata,
                 intervals_metadata,
-                open_run_bag,
             )
 
-            with open_run_bag(out / bag_name, spec, echo) as writer:
-                sink = writer if live is None else Tee(writer, live)
-                result = run(spec, bag=sink, progress=report)
-                writer.add_metadata(
-                    INTERVALS_METADATA,
-                    intervals_metadata(result.fault_intervals, result.safety_counters),
-                )
-        else:
-            result = run(spec, bag=live, progress=report)
-    result.save(out, config_echo=echo)
+            writer.add_metadata(
+                INTERVALS_METADATA,
+                intervals_metadata(result.fault_intervals, result.safety_counters),
+            )
+            writer.add_metadata(END_METADATA, end_metadata(result.end))
+            writer.close()
+        result.save(claim.path, config_echo=echo)
     for iv in result.fault_intervals:
         if iv.kind == "safe":
             until = "the end" if iv.end_s == float("inf") else f"{iv.end_s:.3f} s"
@@ -238,6 +318,24 @@ def execute(
                 file=sys.stderr,
             )
     return result
+
+
+def _abandon(writer: Any, err: BaseException) -> None:
+    """A run that raised: an interruption before the first sample leaves no bag; a failure
+    leaves a complete bag that says it failed (``pneu.end`` status ``failed``)."""
+    if isinstance(err, KeyboardInterrupt):
+        writer.discard()
+        return
+    from pneu_control.experiment.bag_log import END_METADATA, end_metadata
+
+    try:
+        writer.add_metadata(
+            END_METADATA,
+            end_metadata({"status": "failed", "error": f"{type(err).__name__}: {err}"}),
+        )
+        writer.close()
+    except Exception:
+        writer.discard()
 
 
 def metrics_from_bag(path: str | Path, axis: str):

@@ -66,8 +66,9 @@ B_STUCK = 12  # stuck:<...>, bits 12..15
 B_JUMP = 16  # encoder_jump:encoder
 B_OVERSPEED = 17  # overspeed
 B_NO_ROT = 18  # no_rotation:encoder
+B_STROKE = 19  # stroke_limit:x (the piston at or beyond a soft limit)
 ROT_BITS = (1 << 2) | (1 << 6) | (1 << 10) | (1 << 14) | (1 << 16) | (1 << 17) | (1 << 18)
-LIN_BITS = ((1 << 19) - 1) & ~ROT_BITS
+LIN_BITS = ((1 << 20) - 1) & ~ROT_BITS
 
 # sf: float state
 SF_X, SF_V, SF_RATE, SF_CMD_U, SF_FV = 0, 1, 2, 3, 5  # SF_CMD_U: 2 axes, SF_FV: 4 channels
@@ -166,6 +167,8 @@ def sup_check_sample(sp, si, sf, sn, xw_t, xw_x, cw_t, cw_c, now, p1, p2, pm, x,
         mask |= 1 << (B_OVER + 2)
     if abs(x) > sp[SP_X_ABS]:
         mask |= 1 << B_POS
+    elif x >= sp[SP_X_HI] or x <= sp[SP_X_LO]:
+        mask |= 1 << B_STROKE
     stuck_ns = si[SI_STUCK_NS]
     for i in range(4):  # frozen analog values (the raw volts)
         v = volts[i]

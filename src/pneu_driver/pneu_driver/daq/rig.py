@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pneu_msgs_py.contract.units import P_ATM_PA
 from pneu_msgs_py.params.core import ParamError, from_dict, param, with_updates
+from pneu_msgs_py.params.yaml_file import load_yaml, located
 
 __all__ = [
     "ChannelMap",
@@ -460,7 +460,8 @@ class RigParams:
 def load_rig_params(
     path: str | Path | None = None, overrides: dict[str, Any] | None = None
 ) -> RigParams:
-    """Read ``rig.yaml`` (default: the project's ``config/rig.yaml``); missing keys take defaults.
+    """Read ``rig.yaml`` (default: the project's ``config/rig.yaml``) strictly: every key
+    present, none unknown, none twice (:mod:`pneu_msgs_py.params.yaml_file`).
 
     ``overrides`` are dotted names (``{"loop.timing": "software"}``) applied as one set.
     Raises :class:`ParamError` naming the bad key, its value and the allowed range.
@@ -469,9 +470,9 @@ def load_rig_params(
         from pneu_msgs_py.params.paths import config_file
 
         path = config_file("rig.yaml")
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh) or {}
-    rig = from_dict(RigParams, data, strict=False)
+    data = load_yaml(path)
+    with located(path, data):
+        rig = from_dict(RigParams, data if data is not None else {}, strict=True)
     if overrides:
         rig = with_updates(rig, overrides)
     return rig

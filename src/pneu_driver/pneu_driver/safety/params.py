@@ -6,8 +6,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pneu_msgs_py.params.core import ParamError, from_dict, param, with_updates
+from pneu_msgs_py.params.yaml_file import load_yaml, located
 
 __all__ = ["SafetyParams", "load_safety_params"]
 
@@ -239,14 +239,15 @@ class SafetyParams:
 def load_safety_params(
     path: str | Path | None = None, overrides: dict[str, Any] | None = None
 ) -> SafetyParams:
-    """Read ``safety.yaml`` (default: the project's ``config/safety.yaml``); missing keys take defaults."""
+    """Read ``safety.yaml`` (default: the project's ``config/safety.yaml``) strictly: every key
+    present, none unknown, none twice (:mod:`pneu_msgs_py.params.yaml_file`)."""
     if path is None:
         from pneu_msgs_py.params.paths import config_file
 
         path = config_file("safety.yaml")
-    with open(path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh) or {}
-    params = from_dict(SafetyParams, data, strict=False)
+    data = load_yaml(path)
+    with located(path, data):
+        params = from_dict(SafetyParams, data if data is not None else {}, strict=True)
     if overrides:
         params = with_updates(params, overrides)
     return params

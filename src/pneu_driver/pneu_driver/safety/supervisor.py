@@ -13,9 +13,19 @@ per rig, stepped from one thread:
 
 Faults latch per axis: the valve stays at its safe value (5 V, closed centre)
 until the condition is gone *and* :meth:`SafetySupervisor.acknowledge` (or
-:meth:`~SafetySupervisor.reset`) is called. Soft limits do not latch: they
-only hold back the part of a command that drives the piston further toward an
-end stop. Every transition is queued as a :class:`SafetyEvent` for
+:meth:`~SafetySupervisor.reset`) is called. The stroke soft limits act twice:
+
+- *hold* (not latched): while the piston plus its braking distance v²/(2a)
+  reaches a soft limit, commands driving it further are held at 5 V;
+- *trip* (latched, ``stroke_limit``): the piston at or beyond a soft limit
+  takes the linear axis safe. Holding is not braking: the closed centre traps
+  the chamber pressures, and with the cap side near supply and the rod side
+  near atmosphere the trapped air keeps pushing until it balances -- beyond
+  the end stop for a piston driven there at full opening (a 500 mm sine
+  reference reached the end stop at 75.3 mm under a "hold" that never tripped,
+  so the run reported OK). The trip makes that visible (exit code 3); it can
+  be acknowledged while the piston is still out there, so a controller can
+  retract it (the hold keeps refusing the other way). Every transition is queued as a :class:`SafetyEvent` for
 ``/diagnostics`` and the bag (:meth:`~SafetySupervisor.events` drains them).
 
 Time: all stamps are int nanoseconds on one clock (the sample clock). A
@@ -204,6 +214,16 @@ class SafetySupervisor:
                 "position_range",
                 f"x = {x:.4g} m beyond the end stops (|x| ≤ {self._x_abs_max:g} m)",
                 x_m=x,
+            )
+        elif x >= self._x_hi or x <= self._x_lo:
+            # the hold did not stop the piston (see the module docstring): trip, latched
+            flag(
+                "x",
+                "stroke_limit",
+                f"piston at x = {x * 1e3:.4g} mm, at or beyond the soft limit "
+                f"±{self._x_hi * 1e3:g} mm",
+                x_m=x,
+                limit_m=self._x_hi if x > 0 else self._x_lo,
             )
         # frozen analog values: the raw volts when given, else the SI value
         values = raw_volts if raw_volts is not None else (sample.p_c1, sample.p_c2, sample.p_m1, x)
@@ -455,7 +475,7 @@ class SafetySupervisor:
             f"{key} ({msg})"
             for group in self._groups.values()
             for (a, key), (msg, _v) in group.items()
-            if a == axis and key != "watchdog"
+            if a == axis and key not in ("watchdog", "stroke_limit:x")
         ]
 
     def _clear_axis(self, axis: str) -> list[str]:

@@ -89,6 +89,8 @@ class _Column:
     def result(self) -> np.ndarray:
         """The column; a read-only broadcast view if it held one value throughout."""
         if self.arr is None:
+            if not self.has_const:  # no value at all
+                return np.empty(0, dtype=self.dtype)
             return np.broadcast_to(np.asarray(self.const, dtype=self.dtype), (self.n,))
         out = self.arr[: self.n]
         if self.cap > self.n + self.n // 8:

@@ -8,10 +8,17 @@ message indexes, and flushes it to the OS (a hard kill loses at most the
 chunk being buffered), and at :meth:`~McapContainer.finish` writes the
 summary (schemas, channels, statistics, chunk and metadata indexes, summary
 offsets) and the footer.
+
+The file is written as ``NAME.partial`` (created exclusively: a second
+writer, or one killed before it finished, is never overwritten) and renamed
+to ``NAME`` by :meth:`~McapContainer.close` after :meth:`~McapContainer.finish`
+(atomic): a ``.mcap`` is always a finished bag, a ``.mcap.partial`` one that
+was cut short (``pneu recover`` makes it whole).
 """
 
 from __future__ import annotations
 
+import os
 import zlib
 from collections.abc import Mapping
 from pathlib import Path
@@ -29,9 +36,10 @@ from pneu_msgs_py.bag.schemas import (
 from pneu_msgs_py.contract.qos import offered_qos_yaml
 from pneu_msgs_py.contract.topics import qos_for
 
-__all__ = ["COMPRESSIONS", "McapContainer"]
+__all__ = ["COMPRESSIONS", "PARTIAL_SUFFIX", "McapContainer"]
 
 COMPRESSIONS = ("zstd", "lz4", "none")
+PARTIAL_SUFFIX = ".partial"  # the same convention as pneu_msgs_py.lifecycle.outputs
 
 
 class McapContainer:
@@ -52,13 +60,22 @@ class McapContainer:
         else:
             self._compress = None
         self._comp_name = "" if compression == "none" else compression
+        self.partial_path = path.with_name(path.name + PARTIAL_SUFFIX)
+        self.finished = False
         try:
-            self._f = open(self.path, "wb")
+            self._f = open(self.partial_path, "xb")
+        except FileExistsError:
+            raise BagWriteError(
+                self.partial_path,
+                "exists: another writer is writing this bag, or one was killed before it "
+                "finished (pneu recover it, or remove it)",
+            ) from None
         except OSError as e:
             raise BagWriteError(self.path, f"cannot open for writing: {e.strerror}") from None
         self._pos = 0
         self._crc = 0
         self.schemas: dict[str, tuple[int, bytes]] = {}
+        self._schema_text: dict[str, bytes] = {}
         self.channels: dict[str, Channel] = {}
         self._chunk_indexes: list[bytes] = []
         self._metadata_indexes: list[bytes] = []
@@ -72,7 +89,16 @@ class McapContainer:
         self._crc = zlib.crc32(data, self._crc)
         self._pos += len(data)
 
-    def channel(self, topic: str, ros_type: str) -> Channel:
+    def channel(
+        self,
+        topic: str,
+        ros_type: str,
+        *,
+        schema_text: bytes | None = None,
+        channel_metadata: Mapping[str, str] | None = None,
+    ) -> Channel:
+        """The channel of ``topic`` (created on first use). ``schema_text`` and
+        ``channel_metadata`` carry a foreign bag's own definition and QoS (pneu recover)."""
         ch = self.channels.get(topic)
         if ch is not None:
             if ch.ros_type != ros_type:
@@ -82,22 +108,24 @@ class McapContainer:
             return ch
         if ros_type not in self.schemas:
             sid = len(self.schemas) + 1
-            text = MSG_DEFINITIONS.get(ros_type)
-            if text is None:
-                text = ""  # foreign type via write_serialized: definition unknown here
-            self.schemas[ros_type] = (
-                sid,
-                R.schema(sid, ros_type, SCHEMA_ENCODING, text.encode("utf-8")),
-            )
+            if schema_text is None:
+                # foreign type via write_serialized: definition unknown here
+                schema_text = MSG_DEFINITIONS.get(ros_type, "").encode("utf-8")
+            self._schema_text[ros_type] = schema_text
+            self.schemas[ros_type] = (sid, R.schema(sid, ros_type, SCHEMA_ENCODING, schema_text))
         sid = self.schemas[ros_type][0]
         cid = len(self.channels) + 1
         qos = qos_for(topic, self.qos_mode)
         ch = Channel(cid, topic, ros_type, sid, qos)
         # the two channel metadata keys rosbag2 (Jazzy) writes
-        meta = {
-            "offered_qos_profiles": offered_qos_yaml([qos]),
-            "topic_type_hash": TYPE_HASHES.get(ros_type, ""),
-        }
+        meta = (
+            dict(channel_metadata)
+            if channel_metadata is not None
+            else {
+                "offered_qos_profiles": offered_qos_yaml([qos]),
+                "topic_type_hash": TYPE_HASHES.get(ros_type, ""),
+            }
+        )
         ch.record = R.channel(cid, sid, topic, MESSAGE_ENCODING, meta)
         self.channels[topic] = ch
         return ch
@@ -205,8 +233,8 @@ class McapContainer:
 
         schema_recs = []
         for ros_type, (sid, _) in sorted(self.schemas.items(), key=lambda kv: kv[1][0]):
-            text = MSG_DEFINITIONS.get(ros_type, "")
-            schema_recs.append(R.schema(sid, ros_type, SCHEMA_ENCODING, text.encode("utf-8")))
+            text = self._schema_text[ros_type]
+            schema_recs.append(R.schema(sid, ros_type, SCHEMA_ENCODING, text))
         group(R.Op.SCHEMA, schema_recs)
         group(R.Op.CHANNEL, [ch.record for ch in self.channels.values()])
         n_msgs = sum(ch.count for ch in self.channels.values())
@@ -239,6 +267,12 @@ class McapContainer:
         summary_crc = zlib.crc32(foot, summary_crc)
         self._f.write(foot + summary_crc.to_bytes(4, "little") + R.MAGIC)
         self._f.flush()
+        self.finished = True
 
     def close(self) -> None:
+        """Close the file; a finished one is renamed from ``NAME.partial`` to ``NAME``."""
+        if self._f.closed:
+            return
         self._f.close()
+        if self.finished:
+            os.replace(self.partial_path, self.path)

@@ -4,10 +4,18 @@ Reads one chunk at a time (bounded memory). With a summary, chunks are found
 through the chunk indexes; without one (a file cut short by a hard kill, or a
 writer that wrote no summary), the data section is scanned record by record
 and everything up to the last complete chunk is returned.
+
+Damage is contained: a summary whose CRC does not match is not trusted (the
+data section is scanned instead); a chunk that cannot be read (CRC mismatch,
+bad compressed data, impossible sizes) is skipped and reported as a
+:class:`Chunk` with ``problem`` set and the number of messages its index
+counted (``lost``, None when unknown); a record with an impossible length
+stops the scan until the next intact chunk (found by its CRC).
 """
 
 from __future__ import annotations
 
+import mmap
 import os
 import struct
 import zlib
@@ -53,6 +61,9 @@ class Chunk:
     data: bytes
     offsets: dict[int, np.ndarray] | None  # None: no message index, walk the records
     loose: bool = False  # messages outside chunks (unchunked file), gathered as a chunk
+    where: int = 0  # byte offset of the chunk record in the file
+    problem: str = ""  # non-empty: the chunk could not be read (data is empty)
+    lost: dict[int, int] | None = None  # damaged chunk: messages per channel its index counted
 
 
 @dataclass
@@ -63,17 +74,29 @@ class _ChunkRef:
     mi_offsets: dict[int, int] = field(default_factory=dict)
 
 
+_MAX_CHUNK = 1 << 31  # larger uncompressed chunks are damage, not data
+
+
 def _decompress(path: str, compression: str, data: bytes, size: int) -> bytes:
     if compression == "":
         return data
-    if compression == "zstd":
-        import zstandard
+    if size > _MAX_CHUNK:
+        raise CorruptBagError(path, f"chunk claims {size} uncompressed bytes")
+    try:
+        if compression == "zstd":
+            import zstandard
 
-        return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
-    if compression == "lz4":
-        import lz4.frame
+            return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
+        if compression == "lz4":
+            import lz4.frame
 
-        return lz4.frame.decompress(data)
+            return lz4.frame.decompress(data)
+    except MemoryError:
+        raise CorruptBagError(path, "chunk does not decompress (out of memory)") from None
+    except Exception as err:  # zstd.ZstdError, lz4's RuntimeError: damaged compressed bytes
+        raise CorruptBagError(
+            path, f"chunk does not decompress ({type(err).__name__}: {err})"
+        ) from None
     raise CorruptBagError(path, f"chunk compression {compression!r} not supported")
 
 
@@ -135,33 +158,58 @@ class McapFile:
 
     def _open(self) -> None:
         head = self._read_at(0, 8)
+        # a file that ends with the MCAP magic is a bag whose first bytes are damaged: read on
+        tail_ok = self.size >= 16 and self._read_at(self.size - 8, 8) == R.MAGIC
         if head != R.MAGIC:
             if len(head) < 8 and R.MAGIC.startswith(head) and head:
                 raise TruncatedBagError(self.path, f"file ends after {len(head)} bytes")
             if not head:
                 raise NotMcapError(self.path, "empty file, not MCAP")
-            raise NotMcapError(self.path, "not an MCAP file (no MCAP magic at the start)")
+            if not tail_ok:
+                raise NotMcapError(self.path, "not an MCAP file (no MCAP magic at the start)")
+            self.warnings.append("MCAP magic at the start damaged (the file ends as MCAP)")
         rec = self._read_at(8, 9)
         if len(rec) < 9:
             raise TruncatedBagError(self.path, "file ends inside the MCAP header")
         op, length = _REC.unpack(rec)
-        if op != R.Op.HEADER or length > 1 << 20:
-            raise NotMcapError(self.path, "MCAP file without a header record")
-        body = self._read_at(17, length)
-        if len(body) < length:
-            raise TruncatedBagError(self.path, "file ends inside the MCAP header")
-        c = R.Cursor(body)
         try:
-            self.profile = c.string()
-            self.library = c.string()
-        except IndexError:
-            raise NotMcapError(self.path, "malformed MCAP header record") from None
+            if op != R.Op.HEADER or length > 1 << 20:
+                raise NotMcapError(self.path, "MCAP file without a header record")
+            body = self._read_at(17, length)
+            if len(body) < length:
+                raise TruncatedBagError(self.path, "file ends inside the MCAP header")
+            c = R.Cursor(body)
+            try:
+                self.profile = c.string()
+                self.library = c.string()
+            except (IndexError, UnicodeDecodeError):
+                raise NotMcapError(self.path, "malformed MCAP header record") from None
+        except NotMcapError as err:
+            if not tail_ok:
+                raise
+            self.warnings.append(f"MCAP header damaged ({err.problem}): read on as ROS 2")
+            self.profile, self.library = "ros2", ""
+            length = length if op == R.Op.HEADER and length <= 1 << 20 else -9
         if self.profile != "ros2":
-            raise NotRos2Error(
-                self.path, f"MCAP profile is {self.profile!r}, not 'ros2' (not a ROS 2 bag)"
-            )
+            near = len(self.profile) == 4 and sum(a != b for a, b in zip(self.profile, "ros2")) <= 2
+            if tail_ok and (near or not (self.profile.isprintable() and self.profile.isascii())):
+                self.warnings.append(f"MCAP profile {self.profile!r} damaged: read on as ROS 2")
+            else:
+                raise NotRos2Error(
+                    self.path, f"MCAP profile is {self.profile!r}, not 'ros2' (not a ROS 2 bag)"
+                )
         self._data_start = 17 + length
-        if not self._read_summary():
+        try:
+            ok = self._read_summary()
+        except (CorruptBagError, IndexError, struct.error, UnicodeDecodeError, ValueError) as err:
+            why = err.problem if isinstance(err, CorruptBagError) else "malformed"
+            self.warnings.append(f"summary section unreadable ({why}): scanned the data section")
+            self.schemas.clear()
+            self.channels.clear()
+            self.metadata.clear()
+            self.message_counts = None
+            ok = False
+        if not ok:
             self._scan_for_summary()
 
     def _read_summary(self) -> bool:
@@ -179,6 +227,9 @@ class McapFile:
         if not self._data_start <= summary_start <= end:
             raise CorruptBagError(self.path, "footer points outside the file")
         blob = self._read_at(summary_start, end - summary_start)
+        want_crc = struct.unpack_from("<I", tail, R.FOOTER_SIZE - 4)[0]
+        if want_crc and zlib.crc32(tail[: R.FOOTER_SIZE - 4], zlib.crc32(blob)) != want_crc:
+            raise CorruptBagError(self.path, "summary CRC mismatch")
         chunks: list[_ChunkRef] = []
         meta_refs: list[tuple[int, int]] = []
         pos = 0
@@ -210,10 +261,15 @@ class McapFile:
         self._chunks = sorted(chunks, key=lambda r: r.offset)
         for off, mlen in meta_refs:
             raw = self._read_at(off, mlen)
-            if len(raw) == mlen and raw[0] == R.Op.METADATA:
-                c = R.Cursor(raw, 9)
-                name = c.string()
-                self.metadata.setdefault(name, {}).update(c.str_map())
+            try:
+                if len(raw) == mlen and raw[0] == R.Op.METADATA:
+                    c = R.Cursor(raw, 9)
+                    name = c.string()
+                    self.metadata.setdefault(name, {}).update(c.str_map())
+                else:
+                    raise IndexError
+            except (IndexError, struct.error, UnicodeDecodeError):
+                self.warnings.append(f"metadata record at byte {off} unreadable: skipped")
         return True
 
     def _add_schema(self, c: R.Cursor) -> None:
@@ -239,31 +295,48 @@ class McapFile:
             yield from self._scan()
 
     def _load_indexed(self, ref: _ChunkRef) -> Chunk:
+        """The chunk at ``ref``, or a damaged :class:`Chunk` saying why and what was lost."""
+        if ref.length > self.size or ref.mi_length > self.size:
+            return Chunk(b"", {}, where=ref.offset, problem="impossible size in its index")
         raw = self._read_at(ref.offset, ref.length + ref.mi_length)
         if len(raw) < ref.length:
             raise TruncatedBagError(self.path, f"chunk at byte {ref.offset} is cut short")
-        data = self._chunk_data(raw, ref.offset)
         offsets: dict[int, np.ndarray] | None = {}
+        bad_index = False
         for cid, mio in ref.mi_offsets.items():
-            p = mio - ref.offset
-            offsets[cid] = self._parse_message_index(raw, p)[1]
+            try:
+                offsets[cid] = self._parse_message_index(raw, mio - ref.offset)[1]
+            except (IndexError, ValueError, struct.error):
+                bad_index = True
         if not ref.mi_offsets:
             offsets = None
-        return Chunk(data, offsets)
+        try:
+            data = self._chunk_data(raw, ref.offset)
+        except CorruptBagError as err:
+            lost = None if bad_index or offsets is None else {c: len(o) for c, o in offsets.items()}
+            return Chunk(b"", {}, where=ref.offset, problem=err.problem, lost=lost)
+        if bad_index:
+            offsets = None  # the data is intact (CRC): walk its records instead
+        return Chunk(data, offsets, where=ref.offset)
 
     def _chunk_data(self, raw: bytes, where: int) -> bytes:
+        if len(raw) < 9:
+            raise CorruptBagError(self.path, f"chunk at byte {where} is cut short")
         op, length = _REC.unpack_from(raw, 0)
         if op != R.Op.CHUNK:
             raise CorruptBagError(self.path, f"no chunk record at byte {where}")
-        c = R.Cursor(raw, 9, 9 + length)
+        c = R.Cursor(raw, 9, min(9 + length, len(raw)))
         try:
             _s, _e, usize, crc = _CHUNK_HEAD.unpack_from(raw, c._need(_CHUNK_HEAD.size))
             comp = c.string()
             n = c.u64()
             start = c._need(n)
-        except IndexError:
+        except (IndexError, UnicodeDecodeError, struct.error):
             raise CorruptBagError(self.path, f"malformed chunk at byte {where}") from None
-        data = _decompress(self.path, comp, raw[start : start + n], usize)
+        try:
+            data = _decompress(self.path, comp, raw[start : start + n], usize)
+        except CorruptBagError as err:
+            raise CorruptBagError(self.path, f"chunk at byte {where}: {err.problem}") from None
         if len(data) != usize:
             raise CorruptBagError(self.path, f"chunk at byte {where}: size mismatch")
         if crc and zlib.crc32(data) != crc:
@@ -272,12 +345,48 @@ class McapFile:
 
     @staticmethod
     def _parse_message_index(raw: bytes, p: int) -> tuple[int, np.ndarray]:
-        op, _length = _REC.unpack_from(raw, p)
+        op, length = _REC.unpack_from(raw, p)
         if op != R.Op.MESSAGE_INDEX:
             raise IndexError("not a message index")
         cid, nbytes = struct.unpack_from("<HI", raw, p + 9)
+        if nbytes % 16 or nbytes + 6 != length or p + 15 + nbytes > len(raw):
+            raise IndexError("malformed message index")
         arr = np.frombuffer(raw, dtype="<u8", count=nbytes // 8, offset=p + 15).reshape(-1, 2)
         return cid, arr[:, 1].astype(np.int64)
+
+    def definitions_in(self, data: bytes) -> None:
+        """Schema and channel records written inside a chunk (some writers do)."""
+        pos, n = 0, len(data)
+        while pos + 9 <= n:
+            op, length = _REC.unpack_from(data, pos)
+            if op in (R.Op.SCHEMA, R.Op.CHANNEL):
+                c = R.Cursor(data, pos + 9, min(pos + 9 + length, n))
+                try:
+                    if op == R.Op.SCHEMA:
+                        self._add_schema(c)
+                    else:
+                        self._add_channel(c)
+                except (IndexError, UnicodeDecodeError, struct.error):
+                    pass
+            pos += 9 + length
+
+    def _resync(self, pos: int) -> int | None:
+        """The byte offset of the next intact chunk record after ``pos`` (its CRC checks), or None."""
+        with mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            at = pos + 1
+            for _ in range(100_000):
+                at = mm.find(bytes([R.Op.CHUNK]), at)
+                if at < 0 or at + 9 > self.size:
+                    return None
+                length = _REC.unpack_from(mm, at)[1]
+                if 9 + length <= self.size - at:
+                    try:
+                        self._chunk_data(mm[at : at + 9 + length], at)
+                        return at
+                    except CorruptBagError:
+                        pass
+                at += 1
+        return None
 
     def _scan(self) -> Iterator[Chunk]:
         f = self._f
@@ -292,46 +401,67 @@ class McapFile:
             if len(head) < 9:
                 break
             op, length = _REC.unpack(head)
-            if length > self.size:
-                self.warnings.append(f"impossible record length at byte {pos}")
-                break
+            if length > self.size - pos - 9 or not 0x01 <= op <= 0x10:
+                if pending is not None:
+                    yield pending
+                    pending = None
+                nxt = self._resync(pos)
+                if nxt is None and 0x01 <= op <= 0x10 and length <= self.size:
+                    break  # a record cut by the end of the file: truncated
+                self.warnings.append(
+                    f"unreadable bytes from byte {pos} "
+                    + (f"to {nxt}: skipped to the next intact chunk" if nxt else "to the end")
+                    + " (messages there lost, count unknown)"
+                )
+                if nxt is None:
+                    ended = True  # nothing more to read: not a truncation
+                    break
+                pos = nxt
+                f.seek(pos)
+                continue
             body = f.read(length)
             if len(body) < length:
                 break
             if op != R.Op.MESSAGE_INDEX and pending is not None:
                 yield pending
                 pending = None
-            if op == R.Op.CHUNK:
-                try:
-                    data = self._chunk_data(head + body, pos)
-                except CorruptBagError as e:
-                    self.warnings.append(e.problem)
+            try:
+                if op == R.Op.CHUNK:
+                    try:
+                        pending = Chunk(self._chunk_data(head + body, pos), None, where=pos)
+                        n_chunks += 1
+                    except CorruptBagError as e:
+                        pending = Chunk(b"", {}, where=pos, problem=e.problem, lost={})
+                elif op == R.Op.MESSAGE_INDEX and pending is not None:
+                    cid, offs = self._parse_message_index(head + body, 0)
+                    if pending.problem:
+                        pending.lost[cid] = pending.lost.get(cid, 0) + len(offs)
+                    else:
+                        if pending.offsets is None:
+                            pending.offsets = {}
+                        pending.offsets[cid] = offs
+                elif op == R.Op.SCHEMA:
+                    self._add_schema(R.Cursor(body))
+                elif op == R.Op.CHANNEL:
+                    self._add_channel(R.Cursor(body))
+                elif op == R.Op.MESSAGE:
+                    loose.append(head + body)
+                elif op == R.Op.METADATA:
+                    c = R.Cursor(body)
+                    name = c.string()
+                    self.metadata.setdefault(name, {}).update(c.str_map())
+                elif op == R.Op.DATA_END:
+                    ended = True
                     break
-                pending = Chunk(data, None)
-                n_chunks += 1
-            elif op == R.Op.MESSAGE_INDEX and pending is not None:
-                _, offs = self._parse_message_index(head + body, 0)
-                cid = struct.unpack_from("<H", body, 0)[0]
-                if pending.offsets is None:
-                    pending.offsets = {}
-                pending.offsets[cid] = offs
-            elif op == R.Op.SCHEMA:
-                self._add_schema(R.Cursor(body))
-            elif op == R.Op.CHANNEL:
-                self._add_channel(R.Cursor(body))
-            elif op == R.Op.MESSAGE:
-                loose.append(head + body)
-            elif op == R.Op.METADATA:
-                c = R.Cursor(body)
-                name = c.string()
-                self.metadata.setdefault(name, {}).update(c.str_map())
-            elif op == R.Op.DATA_END:
-                ended = True
-                break
+            except (IndexError, ValueError, struct.error, UnicodeDecodeError):
+                if op == R.Op.MESSAGE_INDEX and pending is not None and not pending.problem:
+                    pending.offsets = None  # walk the (CRC-checked) records instead
+                else:
+                    self.warnings.append(f"unreadable record (opcode {op}) at byte {pos}: skipped")
             pos += 9 + length
         if pending is not None:
             # its message indexes may be cut: walk the records instead
-            if self.truncated and not ended:
+            if not ended and not pending.problem:
                 pending.offsets = None
             yield pending
         if loose:
@@ -342,4 +472,5 @@ class McapFile:
             self.warnings.append(
                 f"file is truncated; read the {n_chunks} complete chunk(s)"
                 + (" and loose messages" if loose else "")
+                + " (messages of the chunk being written when it was cut are lost)"
             )

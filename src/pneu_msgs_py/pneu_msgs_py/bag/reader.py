@@ -28,7 +28,9 @@ Messages are in log-time order.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import struct
 import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -108,6 +110,13 @@ def bag_files(path: str | os.PathLike) -> tuple[list[Path], list[str]]:
             raise EmptyBagError(p, "rosbag2 directory lists no files")
         return files, warn
     if not p.exists():
+        partial = p.with_name(p.name + ".partial")
+        if partial.is_file():
+            raise NotMcapError(
+                p,
+                f"no such file; {partial} is there (a recording that was cut short: "
+                f"pneu recover {partial} --out NEW.mcap)",
+            )
         raise NotMcapError(p, "no such file or directory")
     return [p], warn
 
@@ -137,6 +146,7 @@ class _Ctx:
     # topic -> (ros type, qos, capacity hint)
     topics: dict[str, tuple[str, list[QosProfile], int]] = field(default_factory=dict)
     truncated: list[str] = field(default_factory=list)
+    damaged: int = 0  # chunks skipped as unreadable
 
 
 def _file_chunks(path: Path, ctx: _Ctx) -> Iterator[list[tuple[str, list[Piece]]]]:
@@ -183,23 +193,32 @@ def _file_chunks(path: Path, ctx: _Ctx) -> Iterator[list[tuple[str, list[Piece]]
 
         for cid in f.channels:
             decoder(cid)
+        read: dict[int, int] = {}
+        lost_unknown = False
         for chunk in f.iter_chunks():
-            offsets = chunk.offsets
-            if offsets is None:
-                offsets = walk_offsets(chunk.data)
+            if chunk.problem:
+                n = None if chunk.lost is None else sum(chunk.lost.values())
+                lost_unknown |= n is None
+                ctx.damaged += 1
+                ctx.warn.append(
+                    f"{path}: {chunk.problem}: chunk skipped, "
+                    + ("messages in it lost (count unknown)" if n is None else f"{n} messages lost")
+                )
+                continue
             out = []
-            for cid, offs in offsets.items():
-                dec = decoder(cid)
-                if dec is None:
-                    if cid not in f.channels:
-                        ctx.warn.append(f"{path}: messages on unknown channel id {cid} skipped")
-                    continue
-                ch = f.channels[cid]
-                try:
-                    out.append((ch.topic, dec.decode(chunk.data, offs)))
-                except CdrDecodeError as e:
-                    raise CorruptBagError(path, f"topic {ch.topic}: {e}") from None
+            for cid, pieces in _decode_chunk(chunk, decoder, f, path, ctx):
+                out.append((f.channels[cid].topic, pieces))
+                read[cid] = read.get(cid, 0) + sum(len(p) for p in pieces)
             yield out
+        if f.message_counts and not f.truncated:
+            wanted = [c for c in f.message_counts if decoders.get(c) is not None]
+            lost = sum(max(0, f.message_counts[c] - read.get(c, 0)) for c in wanted)
+            if lost:
+                total = sum(f.message_counts[c] for c in wanted)
+                ctx.warn.append(
+                    f"{path}: {lost} of {total} messages lost in damaged chunks "
+                    "(counted against the file's statistics)"
+                )
         for name, md in f.metadata.items():  # after the scan: it finds them as it goes
             ctx.metadata.setdefault(name, {}).update(md)
         ctx.warn.extend(f"{path}: {w}" for w in f.warnings)
@@ -228,6 +247,36 @@ def _merge_sidecar(files: list[Path], ctx: _Ctx) -> None:
         return
     for name, rec in records.items():
         ctx.metadata.setdefault(name, rec)
+
+
+def _decode_chunk(chunk, decoder, f: McapFile, path: Path, ctx: _Ctx):
+    """(channel id, pieces) of one chunk; undecodable messages are skipped with a warning."""
+    offsets = chunk.offsets if chunk.offsets is not None else walk_offsets(chunk.data)
+    if any(cid not in f.channels for cid in offsets):
+        f.definitions_in(chunk.data)  # some writers put schemas and channels in chunks
+    for cid, offs in offsets.items():
+        dec = decoder(cid)
+        if dec is None:
+            if cid not in f.channels:
+                ctx.warn.append(f"{path}: messages on unknown channel id {cid} skipped")
+            continue
+        try:
+            yield cid, dec.decode(chunk.data, offs)
+            continue
+        except Exception as e:  # CdrDecodeError, or a malformed message in any decoder
+            why = f"{type(e).__name__}: {e}" if not isinstance(e, CdrDecodeError) else str(e)
+        if chunk.offsets is not None:  # a damaged message index: walk the records instead
+            walked = walk_offsets(chunk.data).get(cid)
+            if walked is not None:
+                try:
+                    yield cid, dec.decode(chunk.data, walked)
+                    continue
+                except Exception:
+                    pass
+        ctx.warn.append(
+            f"{path}: {len(offs)} {f.channels[cid].topic} message(s) in the chunk at byte "
+            f"{chunk.where} undecodable ({why}): skipped"
+        )
 
 
 def _finish(path, ctx: _Ctx, collectors: dict[str, Collector], strict: bool) -> RunData:
@@ -275,6 +324,38 @@ def _build_all(collectors: dict[str, Collector]) -> dict[str, TopicArrays]:
     return out
 
 
+@contextlib.contextmanager
+def _damage_as_bag_error(path) -> Iterator[None]:
+    """Damage no check above foresaw still ends as one line naming the file, never a traceback."""
+    try:
+        yield
+    except BagError:
+        raise
+    except (
+        IndexError,
+        KeyError,
+        ValueError,
+        TypeError,
+        OverflowError,
+        struct.error,
+        MemoryError,
+    ) as err:
+        raise CorruptBagError(
+            path, f"damaged: {type(err).__name__}: {' '.join(str(err).split())}"
+        ) from None
+
+
+def _foreign(ctx: _Ctx) -> str:
+    """What a bag without readable pneu messages holds, in one line."""
+    types = {t: ty for t, (ty, _q, _c) in ctx.topics.items()} | ctx.skipped
+    listed = ", ".join(f"{t} ({types[t]})" for t in sorted(types)[:8])
+    if len(types) > 8:
+        listed += f", ... ({len(types)} topics)"
+    if not any(t.startswith("/pneu/") for t in types):
+        return f"not a pneu run: no /pneu topics; found {listed}"
+    return f"no messages of a type pneu reads; found {listed}"
+
+
 def _emit_warnings(ws: list[str]) -> None:
     for w in ws:
         warnings.warn(w, TruncatedBagWarning if "truncated" in w else UserWarning, stacklevel=3)
@@ -305,17 +386,26 @@ def read_run(
     files, warn = bag_files(path)
     ctx = _Ctx(None if topics is None else set(topics), warn=warn)
     collectors: dict[str, Collector] = {}
-    for fpath in files:
-        for results in _file_chunks(fpath, ctx):
-            _add_results(results, collectors, ctx, None)
-        for topic, (ros_type, qos, _cap) in ctx.topics.items():
-            if topic not in collectors:  # a channel without messages
-                collectors[topic] = Collector(topic, ros_type, qos, 0)
-    _merge_sidecar(files, ctx)
-    data = _finish(path, ctx, collectors, strict)
+    with _damage_as_bag_error(path):
+        for fpath in files:
+            for results in _file_chunks(fpath, ctx):
+                _add_results(results, collectors, ctx, None)
+            for topic, (ros_type, qos, _cap) in ctx.topics.items():
+                if topic not in collectors:  # a channel without messages
+                    collectors[topic] = Collector(topic, ros_type, qos, 0)
+        _merge_sidecar(files, ctx)
+        data = _finish(path, ctx, collectors, strict)
     if data.message_count == 0:
         if ctx.truncated:
             raise TruncatedBagError(path, "file is truncated before its first complete chunk")
+        if ctx.damaged:
+            raise CorruptBagError(
+                path,
+                f"no readable messages: {ctx.damaged} damaged chunk(s) skipped, none left "
+                "(pneu recover cannot help either)",
+            )
+        if ctx.want is None and ctx.skipped:
+            raise EmptyBagError(path, _foreign(ctx))
         what = "on the requested topics" if ctx.want is not None else "at all"
         raise EmptyBagError(path, f"bag holds no messages {what}")
     _emit_warnings(data.warnings)

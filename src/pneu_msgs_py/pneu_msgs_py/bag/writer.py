@@ -66,7 +66,8 @@ class BagWriter:
 
     Parameters
     ----------
-    path : output ``.mcap`` file (parent directory must exist; overwritten)
+    path : output ``.mcap`` file (parent directory must exist), written as
+        ``path.partial`` and renamed to ``path`` when closed (replacing it)
     metadata : ``{record name: {key: value}}`` written as MCAP metadata at start
     chunk_size : uncompressed bytes per chunk (also the most a hard kill loses)
     compression : ``zstd`` | ``lz4`` | ``none``
@@ -401,8 +402,16 @@ class BagWriter:
         if batches:
             self._mcap.write_chunk(batches)
 
+    def discard(self) -> None:
+        """Close without finishing and remove the partial file (nothing worth keeping)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._mcap.close()
+        self._mcap.partial_path.unlink(missing_ok=True)
+
     def close(self) -> None:
-        """Write the last chunk and the summary; idempotent."""
+        """Write the last chunk and the summary, rename ``.partial`` to the bag; idempotent."""
         if self._closed:
             return
         try:

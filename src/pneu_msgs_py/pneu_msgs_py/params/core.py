@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = [
+    "MISSING",
     "ParamError",
     "ParamSpec",
     "param",
@@ -40,14 +41,30 @@ __all__ = [
 ]
 
 
+class _Missing:
+    """The value of a required key that is not there."""
+
+    def __repr__(self) -> str:
+        return "missing"
+
+
+MISSING = _Missing()
+
+
 class ParamError(ValueError):
-    """A parameter value was refused; the message names the key, value and range."""
+    """A parameter value was refused; the message names the key, value and range.
+
+    ``value`` :data:`MISSING`: the key is required and absent (``key: missing; required: ...``).
+    """
 
     def __init__(self, key: str, value: Any, allowed: str):
         self.key = key
         self.value = value
         self.allowed = allowed
-        super().__init__(f"{key}: {value!r} refused; allowed: {allowed}")
+        if value is MISSING:
+            super().__init__(f"{key}: missing; required: {allowed}")
+        else:
+            super().__init__(f"{key}: {value!r} refused; allowed: {allowed}")
 
 
 def param(
@@ -64,6 +81,7 @@ def param(
     read_only: bool = False,
     band: tuple[float, float] | None = None,
     alternatives: tuple[tuple[str, float], ...] | None = None,
+    allowed: str = "",
 ) -> Any:
     """A dataclass field with pneu metadata.
 
@@ -72,6 +90,8 @@ def param(
     ``band`` (lo, hi) is the range an uncertain value may take (its reason in
     ``source``); ``alternatives`` ((label, value), ...) are discrete readings
     of it. Neither is checked here: the file that carries them checks them.
+    ``allowed`` replaces the printed range where the true one depends on another
+    field (checked by the group's ``_check``), so a refusal never prints a wrong range.
     """
     meta = {
         "pneu": True,
@@ -86,6 +106,7 @@ def param(
         "read_only": read_only,
         "band": band,
         "alternatives": alternatives,
+        "allowed": allowed,
     }
     if dataclasses.is_dataclass(default) and not isinstance(default, type):
         return dataclasses.field(default_factory=lambda d=default: d, metadata=meta)
@@ -110,14 +131,23 @@ class ParamSpec:
 
 
 def _allowed_text(meta: Mapping[str, Any], typ: type) -> str:
+    if meta.get("allowed"):
+        return meta["allowed"]
     if meta.get("choices"):
         return "one of " + ", ".join(meta["choices"])
     lo, hi = meta.get("lo"), meta.get("hi")
     unit = f" {meta['unit']}" if meta.get("unit") else ""
+    if typ is bool:
+        return "true or false"
+    if typ is str:
+        return "a string"
+    if typing.get_origin(typ) is tuple:
+        return f"a list of finite numbers{unit}"
     if lo is None and hi is None:
         return f"any finite {typ.__name__}{unit}"
-    left = "(" if meta.get("lo_open") else "["
-    right = ")" if meta.get("hi_open") else "]"
+    # values are finite: an open end is never included
+    left = "(" if meta.get("lo_open") or lo is None else "["
+    right = ")" if meta.get("hi_open") or hi is None else "]"
     lo_s = "-inf" if lo is None else f"{lo:g}"
     hi_s = "inf" if hi is None else f"{hi:g}"
     return f"{left}{lo_s}, {hi_s}{right}{unit}"
@@ -230,7 +260,12 @@ def from_dict(cls: type, data: Mapping[str, Any], *, strict: bool = True, prefix
                 f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
             )
             if strict or not has_default:
-                raise ParamError(key, None, "required; " + _allowed_text(f.metadata, float))
+                what = (
+                    "the parameter group " + ", ".join(x.name for x in dataclasses.fields(tp))
+                    if isinstance(tp, type) and dataclasses.is_dataclass(tp)
+                    else _allowed_text(f.metadata, tp if isinstance(tp, type) else float)
+                )
+                raise ParamError(key, MISSING, what)
             continue
         value = data[name]
         if isinstance(tp, type) and dataclasses.is_dataclass(tp):

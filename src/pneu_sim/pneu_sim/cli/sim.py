@@ -14,7 +14,13 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 from pneu_msgs_py.contract.units import RPM_PER_RAD_S
+from pneu_msgs_py.lifecycle import exits, signals
+from pneu_msgs_py.lifecycle.duration import check_duration
+from pneu_msgs_py.lifecycle.outputs import OutputDir
+from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_sim.cli import live_options
 
@@ -22,6 +28,8 @@ NAME = "sim"
 HELP = "run the plant twin open loop at constant valve voltages; write CSV + PNG"
 
 __all__ = ["NAME", "HELP", "add_arguments", "run", "simulate"]
+
+ARTEFACTS = ("sim.csv", "sim.png")
 
 CSV_COLUMNS = (
     "t_s",
@@ -44,33 +52,18 @@ def _voltage(text: str) -> float:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (0.0 <= v <= 10.0):
+    if not (0.0 <= v <= 10.0):  # NaN fails too
         raise argparse.ArgumentTypeError(f"{v:g} V outside the valve range [0, 10] V")
     return v
 
 
-def _duration(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (0.0 < v <= 3600.0):
-        raise argparse.ArgumentTypeError(f"{v:g} s outside (0, 3600] s")
-    return v
-
-
-def _seed(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"{v} < 0")
-    return v
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--duration", type=_duration, default=5.0, help="simulated time, s (default 5)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=5.0,
+        help="simulated time, s, [0.01, 600] (the duration cap of every command; default 5)",
+    )
     p.add_argument(
         "--linear-voltage",
         type=_voltage,
@@ -80,8 +73,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--rotary-voltage", type=_voltage, default=5.0, help="rotary valve command, V (0-10)"
     )
-    p.add_argument("--out", type=Path, required=True, help="output directory (created)")
-    p.add_argument("--seed", type=_seed, default=0, help="noise seed (default 0)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="output directory: new or empty (or --overwrite); gets sim.csv, sim.png",
+    )
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace sim.csv and sim.png in the directory"
+    )
+    p.add_argument("--seed", type=int, default=0, help="noise seed, an integer in [0, 2^32 - 1]")
     p.add_argument(
         "--plant", type=Path, default=None, help="plant YAML (default config/plant.yaml)"
     )
@@ -97,16 +98,20 @@ def simulate(
     seed: int = 0,
     progress=None,
     live=None,
-):
-    """Run open loop; returns a list of CSV rows (tuples in CSV_COLUMNS order).
+) -> np.ndarray:
+    """Run open loop; rows in CSV_COLUMNS order, an array preallocated for the whole run.
 
+    A signal recorded by :mod:`pneu_msgs_py.lifecycle.signals` (under
+    ``signals.deferred()``) stops at the next step: the rows that ran are returned.
     ``live``: a :class:`pneu_msgs_py.live.server.LiveServer` that gets every sample and
     the (constant) valve commands.
     """
     from pneu_sim.physics.plant import Plant
 
+    sig = signals.STATE
     plant = Plant(params, seed=seed)
     n = round(duration_s / plant.T)
+    rows = np.empty((n + 1, len(CSV_COLUMNS)))
     s = plant.reset()
     st = plant.state
 
@@ -117,51 +122,27 @@ def simulate(
 
     if live is not None:
         publish(s)
-    rows = [
-        (
-            0.0,
-            u_linear,
-            u_rotary,
-            s.p_c1,
-            s.p_c2,
-            s.p_m1,
-            s.x,
-            s.theta,
-            s.omega,
-            s.counts,
-            st.x,
-            st.omega,
-        )
-    ]
+    rows[0] = (0.0, u_linear, u_rotary, s.p_c1, s.p_c2, s.p_m1, s.x, s.theta, s.omega, s.counts,
+               st.x, st.omega)  # fmt: skip
     t_wall = time.perf_counter()
     t_last = t_wall
+    m = 1
     for i in range(n):
+        if sig.pending is not None:
+            break
         s = plant.step(u_linear, u_rotary)
         st = plant.state
         if live is not None:
             publish(s)
-        rows.append(
-            (
-                s.stamp_ns * 1e-9,
-                u_linear,
-                u_rotary,
-                s.p_c1,
-                s.p_c2,
-                s.p_m1,
-                s.x,
-                s.theta,
-                s.omega,
-                s.counts,
-                st.x,
-                st.omega,
-            )
-        )
+        rows[i + 1] = (s.stamp_ns * 1e-9, u_linear, u_rotary, s.p_c1, s.p_c2, s.p_m1, s.x,
+                       s.theta, s.omega, s.counts, st.x, st.omega)  # fmt: skip
+        m = i + 2
         if progress is not None and (i & 1023) == 0:
             now = time.perf_counter()
             if now - t_last > 2.0:
                 progress(i + 1, n)
                 t_last = now
-    return rows
+    return rows[:m]
 
 
 def _plot(rows, path: Path, title: str) -> None:
@@ -170,33 +151,37 @@ def _plot(rows, path: Path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t = [r[0] for r in rows]
+    t = rows[:, 0]
     fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-    ax[0].plot(t, [r[6] * 1e3 for r in rows], label="laser x")
-    ax[0].plot(t, [r[10] * 1e3 for r in rows], "--", label="true x")
+    ax[0].plot(t, rows[:, 6] * 1e3, label="laser x")
+    ax[0].plot(t, rows[:, 10] * 1e3, "--", label="true x")
     ax[0].set_ylabel("displacement (mm)")
     ax[0].legend(loc="best")
-    ax[1].plot(t, [r[8] * RPM_PER_RAD_S for r in rows], label="encoder ω (Δcounts / T)")
-    ax[1].plot(t, [r[11] * RPM_PER_RAD_S for r in rows], "--", label="true ω")
+    ax[1].plot(t, rows[:, 8] * RPM_PER_RAD_S, label="encoder ω (Δcounts / T)")
+    ax[1].plot(t, rows[:, 11] * RPM_PER_RAD_S, "--", label="true ω")
     ax[1].set_ylabel("speed (rpm)")
     ax[1].legend(loc="best")
     for col, lab in ((3, "p_c1"), (4, "p_c2"), (5, "p_m1")):
-        ax[2].plot(t, [r[col] * 1e-5 for r in rows], label=lab)
+        ax[2].plot(t, rows[:, col] * 1e-5, label=lab)
     ax[2].set_ylabel("pressure (bar abs)")
     ax[2].set_xlabel("time (s)")
     ax[2].legend(loc="best")
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, format="png")
     plt.close(fig)
 
 
 def run(args: argparse.Namespace) -> int:
     from pneu_sim.physics.plant_file import load_plant
 
-    params = load_plant(args.plant)  # ParamError (a ValueError) -> one line via the dispatcher
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    # everything checked before anything is written
+    duration = check_duration(args.duration)
+    if not 0 <= args.seed <= 2**32 - 1:
+        raise ParamError("--seed", args.seed, f"an integer in [0, {2**32 - 1}]")
+    claim = OutputDir(args.out, ARTEFACTS, overwrite=args.overwrite, inputs=[args.plant]).check()
+    with from_option("--plant" if args.plant else None):
+        params = load_plant(args.plant)  # ParamError -> one line, exit 2
 
     def progress(i: int, n: int) -> None:
         print(f"pneu sim: {i}/{n} steps ({100.0 * i / n:.0f} %)", file=sys.stderr, flush=True)
@@ -204,39 +189,57 @@ def run(args: argparse.Namespace) -> int:
     live = live_options.open_live(
         args, axes=("linear", "rotary"), kind="both", controller_state=False
     )
-    try:
-        rows = simulate(
-            params,
-            args.duration,
-            args.linear_voltage,
-            args.rotary_voltage,
-            args.seed,
-            progress,
-            live=live,
-        )
-    finally:
-        if live is not None:
-            live.close()
-    csv_path = out / "sim.csv"
-    with open(csv_path, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow(CSV_COLUMNS)
-        w.writerows(rows)
+    with signals.deferred(), claim:
+        try:
+            rows = simulate(
+                params,
+                duration,
+                args.linear_voltage,
+                args.rotary_voltage,
+                args.seed,
+                progress,
+                live=live,
+            )
+            if live is not None:
+                live.close()
+                live = None
+            with open(claim.partial("sim.csv"), "w", newline="", encoding="utf-8") as fh:
+                w = csv.writer(fh)
+                w.writerow(CSV_COLUMNS)
+                w.writerows([*r[:9].tolist(), int(r[9]), *r[10:].tolist()] for r in rows)
+            claim.publish("sim.csv")
+            if not args.no_plot:
+                title = (
+                    f"pneu sim: u_linear {args.linear_voltage:g} V, u_rotary "
+                    f"{args.rotary_voltage:g} V, seed {args.seed}"
+                )
+                _plot(rows, claim.partial("sim.png"), title)
+                claim.publish("sim.png")
+        except BaseException:
+            claim.discard()
+            raise
+        finally:
+            if live is not None:
+                live.close()
     T = params.sim.T
-    n_end = max(1, round(0.1 / T))  # end position: last 100 ms of laser samples
-    x_end_mm = 1e3 * sum(r[6] for r in rows[-n_end:]) / len(rows[-n_end:])
+    n_end = max(1, min(len(rows), round(0.1 / T)))  # end position: last 100 ms of laser samples
+    x_end_mm = 1e3 * float(np.mean(rows[-n_end:, 6]))
     n_ss = max(1, min(len(rows) - 1, round(1.0 / T)))  # steady speed: last 1 s of encoder speed
-    w_ss = sum(r[8] for r in rows[-n_ss:]) / n_ss
+    w_ss = float(np.mean(rows[-n_ss:, 8]))
     print(f"end position: {x_end_mm:.2f} mm (laser, mean of the last {n_end * T * 1e3:.0f} ms)")
     print(
         f"steady speed: {w_ss * RPM_PER_RAD_S:.1f} rpm (encoder, mean of the last {n_ss * T:.2f} s)"
     )
-    print(f"wrote {csv_path}")
+    print(f"wrote {claim.final('sim.csv')}")
     if not args.no_plot:
-        png = out / "sim.png"
-        title = f"pneu sim: u_linear {args.linear_voltage:g} V, u_rotary {args.rotary_voltage:g} V, seed {args.seed}"
-        _plot(rows, png, title)
-        print(f"wrote {png}")
+        print(f"wrote {claim.final('sim.png')}")
+    if signals.pending() is not None:
+        print(
+            f"pneu sim: interrupted by {signals.signal_name(signals.pending())} at "
+            f"{rows[-1, 0]:.3f} s of {duration:g} s: the files hold what ran",
+            file=sys.stderr,
+        )
+        return exits.interrupted_code(signals.pending())
     if not math.isfinite(x_end_mm):
-        return 1
-    return 0
+        return exits.RUNTIME_ERROR
+    return exits.OK

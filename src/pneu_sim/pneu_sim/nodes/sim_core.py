@@ -43,10 +43,9 @@ def load_faults(text: str = "", path: str = "") -> tuple[Any, ...]:
 
     items: list[Any] = [t for t in (p.strip() for p in text.split(";")) if t]
     if path:
-        import yaml
+        from pneu_msgs_py.params.yaml_file import load_yaml
 
-        with open(path, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh) or []
+        data = load_yaml(path) or []
         if isinstance(data, Mapping):
             data = data.get("faults", [])
         if not isinstance(data, list):

@@ -22,8 +22,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pneu_msgs_py.params.core import from_dict, to_dict, validate
+from pneu_msgs_py.params.core import MISSING, from_dict, to_dict, validate
 from pneu_msgs_py.params.paths import config_file
+from pneu_msgs_py.params.yaml_file import load_yaml, located
 
 from pneu_sim.physics.params import PlantConfigError, PlantParams
 from pneu_sim.physics.ranges import PlantRanges, check_alternatives, check_range, table_ranges
@@ -89,11 +90,11 @@ def _strip(cls: type, tree: Any, prefix: str, unc: PlantRanges) -> dict[str, Any
         if key not in out:
             tp = hints[key]
             if isinstance(tp, type) and dataclasses.is_dataclass(tp):
-                need = "required: the parameter group " + ", ".join(_leaf_meta(tp))
+                need = "the parameter group " + ", ".join(_leaf_meta(tp))
             else:
                 unit = f.metadata.get("unit", "")
-                need = f"required: a leaf {{value, unit: '{unit}', source}}"
-            raise PlantConfigError(f"{prefix}{key}", None, need)
+                need = f"a leaf {{value, unit: '{unit}', source}}"
+            raise PlantConfigError(f"{prefix}{key}", MISSING, need)
     return out
 
 
@@ -116,15 +117,10 @@ def load_plant(path: str | Path | None = None) -> PlantParams:
 
 def load_plant_file(path: str | Path | None = None) -> tuple[PlantParams, PlantRanges]:
     """``plant.yaml`` (default: the project's) -> (parameters, their ranges/alternatives)."""
-    import yaml
-
     path = Path(path) if path is not None else config_file("plant.yaml")
-    with open(path, encoding="utf-8") as fh:
-        try:
-            tree = yaml.safe_load(fh)
-        except yaml.YAMLError as err:
-            raise PlantConfigError(str(path), "unparsable YAML", f"valid YAML ({err})") from None
-    return plant_from_tree(tree if tree is not None else {})
+    tree = load_yaml(path)
+    with located(path, tree):
+        return plant_from_tree(tree if tree is not None else {})
 
 
 def plant_to_yaml_tree(

@@ -1,0 +1,214 @@
+"""The one strict YAML reader for every config file (plant, controllers, safety, rig, faults).
+
+- syntax errors: ``file:line:col: what is wrong`` (one line);
+- a key given twice in one mapping is refused (YAML's "last one wins" would
+  hide a typo): ``file:line:col: key 'M' given twice (first at line 5)``;
+- the mappings it returns remember where each key was written
+  (:class:`MarkedDict`), so a refused value is reported at its place:
+  :func:`located` turns a :class:`~pneu_msgs_py.params.core.ParamError`
+  ``linear.M: -0.28 refused; allowed: (0, 100] kg`` into
+  ``config/plant.yaml:12:5: linear.M: -0.28 refused; allowed: (0, 100] kg``.
+
+Lines and columns are 1-based, as editors show them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from pneu_msgs_py.params.core import ParamError
+
+__all__ = ["ConfigFileError", "MarkedDict", "from_option", "load_yaml", "located"]
+
+
+class ConfigFileError(ParamError):
+    """A config file cannot be read or parsed; ``str(err)`` is ``file[:line:col]: problem``."""
+
+    def __init__(self, path: str | os.PathLike, problem: str, line: int = 0, col: int = 0):
+        self.path = str(path)
+        self.line, self.col, self.problem = line, col, problem
+        where = f"{self.path}:{line}:{col}" if line else self.path
+        ValueError.__init__(self, f"{where}: {problem}")
+        self.key, self.value, self.allowed = where, None, problem
+
+    def __str__(self) -> str:
+        return self.args[0]
+
+
+@contextlib.contextmanager
+def from_option(option: str | None) -> Iterator[None]:
+    """Name the command-line option a file came from in its read/parse errors
+    (``--plant: run.mcap: not UTF-8 text``); ``None``: the default file, named by its path."""
+    try:
+        yield
+    except ConfigFileError as err:
+        if option is None:
+            raise
+        new = ConfigFileError(err.path, err.problem, err.line, err.col)
+        new.args = (f"{option}: {err}",)
+        raise new from None
+    except ParamError as err:  # a value refused, located in the file
+        if option is None:
+            raise
+        new = type(err).__new__(type(err))
+        ParamError.__init__(new, f"{option}: {err.key}", err.value, err.allowed)
+        raise new from None
+
+
+class MarkedDict(dict):
+    """A YAML mapping that remembers the (line, col) of each key (1-based)."""
+
+    __slots__ = ("mark", "marks")
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.marks: dict[Any, tuple[int, int]] = {}
+        self.mark: tuple[int, int] = (0, 0)
+
+
+def _pos(mark: Any) -> tuple[int, int]:
+    return (mark.line + 1, mark.column + 1) if mark is not None else (0, 0)
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader that refuses duplicate keys and returns :class:`MarkedDict` mappings."""
+
+    path = ""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> MarkedDict:
+        if not isinstance(node, yaml.MappingNode):
+            raise yaml.constructor.ConstructorError(
+                None, None, f"expected a mapping, found {node.id}", node.start_mark
+            )
+        seen: dict[Any, Any] = {}
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=True)
+            try:
+                first = seen.get(key)
+            except TypeError:
+                line, col = _pos(key_node.start_mark)
+                raise ConfigFileError(
+                    self.path,
+                    "a mapping key must be a plain value, not a list or mapping",
+                    line,
+                    col,
+                ) from None
+            if first is not None:
+                line, col = _pos(key_node.start_mark)
+                raise ConfigFileError(
+                    self.path,
+                    f"key {key!r} given twice (first at line {first.line + 1}); each key once",
+                    line,
+                    col,
+                )
+            seen[key] = key_node.start_mark
+        self.flatten_mapping(node)
+        out = MarkedDict()
+        out.mark = _pos(node.start_mark)
+        for key_node, value_node in node.value:
+            key = self.construct_object(key_node, deep=True)
+            out[key] = self.construct_object(value_node, deep=deep)
+            out.marks[key] = _pos(key_node.start_mark)
+        return out
+
+
+def _construct_map(loader: _StrictLoader, node: yaml.MappingNode) -> Iterator[MarkedDict]:
+    data = MarkedDict()
+    yield data
+    built = loader.construct_mapping(node)
+    data.update(built)
+    data.marks, data.mark = built.marks, built.mark
+
+
+_StrictLoader.add_constructor("tag:yaml.org,2002:map", _construct_map)
+
+
+def load_yaml(path: str | os.PathLike) -> Any:
+    """Parse ``path`` strictly (see the module docstring); ``None`` for an empty file.
+
+    Raises :class:`ConfigFileError` (a :class:`ParamError`) for a missing or
+    unreadable file, text that is not UTF-8, a syntax error or a duplicate key.
+    """
+    p = Path(path)
+    try:
+        text = p.read_bytes()
+    except IsADirectoryError:
+        raise ConfigFileError(p, "is a directory, not a YAML file") from None
+    except OSError as err:
+        raise ConfigFileError(p, f"cannot read: {err.strerror or err}") from None
+    try:
+        decoded = text.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigFileError(p, f"not UTF-8 text (byte {err.start})") from None
+    loader = _StrictLoader(decoded)
+    loader.path = str(p)
+    try:
+        return loader.get_single_data()
+    except ConfigFileError:
+        raise
+    except yaml.MarkedYAMLError as err:
+        mark = err.problem_mark or err.context_mark
+        line, col = _pos(mark)
+        problem = " ".join(x for x in (err.context, err.problem) if x) or "invalid YAML"
+        raise ConfigFileError(p, _one_line(problem), line, col) from None
+    except yaml.YAMLError as err:
+        raise ConfigFileError(p, _one_line(str(err))) from None
+    except RecursionError:
+        raise ConfigFileError(p, "nested too deeply") from None
+    finally:
+        loader.dispose()
+
+
+def _one_line(text: str) -> str:
+    return re.sub(r"\s+", " ", text).strip()
+
+
+_INDEX = re.compile(r"\[(\d+)\]$")
+
+
+def _where(data: Any, key: str) -> tuple[int, int]:
+    """(line, col) of the dotted ``key`` in ``data`` (the deepest part that exists)."""
+    node, best = data, getattr(data, "mark", (0, 0))
+    for part in key.split("."):
+        idx = _INDEX.search(part)
+        name = part[: idx.start()] if idx else part
+        if not isinstance(node, MarkedDict) or name not in node:
+            break
+        best = node.marks.get(name, best)
+        node = node[name]
+        if idx and isinstance(node, list):
+            i = int(idx.group(1))
+            node = node[i] if i < len(node) else None
+    return best
+
+
+@contextlib.contextmanager
+def located(path: str | os.PathLike, data: Any, root: str = "") -> Iterator[None]:
+    """Re-raise a :class:`ParamError` from loading ``data`` with ``file:line:col:`` in front.
+
+    ``root`` is the dotted path of the mapping the parameter keys are relative
+    to (e.g. ``linear_controller.ros__parameters``); the key keeps the name
+    the user wrote.
+    """
+    try:
+        yield
+    except ConfigFileError:
+        raise
+    except ParamError as err:
+        node = data
+        for part in filter(None, root.split(".")):
+            node = node.get(part) if isinstance(node, Mapping) else None
+        line, col = _where(node, str(err.key)) if node is not None else (0, 0)
+        where = f"{path}:{line}:{col}" if line else str(path)
+        new = type(err).__new__(type(err))
+        ParamError.__init__(new, f"{where}: {err.key}", err.value, err.allowed)
+        raise new from None
