@@ -39,6 +39,13 @@ ARGS = [
     ),
     ("duration", "20.0", "simulated seconds, then everything stops (0 = run until Ctrl-C)", None),
     ("seed", "0", "noise seed of the twin", None),
+    (
+        "rt_priority",
+        "50",
+        "realtime: SCHED_FIFO priority of the 1 kHz loop thread, as the rig's loop.rt_priority "
+        "(0 = normal scheduling; without root, CAP_SYS_NICE or an rtprio limit: a warning, normal)",
+        None,
+    ),
     ("out", "out/ros", "directory of the bag (run.mcap)", None),
     (
         "safety",
@@ -69,6 +76,7 @@ def _setup(arg: dict[str, str]) -> list:
         "plant_file": os.path.join(config, "plant.yaml"),
         "safety_file": os.path.join(config, "safety.yaml"),
         "faults": arg["faults"],
+        "realtime.rt_priority": int(arg["rt_priority"]),
         # before sample 0: every sensor topic matched by its subscribers (the controllers
         # take 3 / 1 of the 5 topics, so at least the recorder or the logger)
         "startup.min_subscribers": 1,
