@@ -13,13 +13,16 @@ PNEU = [sys.executable, "-m", "pneu_control.cli.main"]
 DOCUMENTED = {0, 1, 2, 3, 129, 130, 143}
 
 
-def start(*argv: str) -> subprocess.Popen:
+def start(*argv: str, new_session: bool = False) -> subprocess.Popen:
+    """``pneu ARGV`` as a process; ``new_session``: in its own process group (a terminal's
+    Ctrl-C reaches the whole group: ``os.killpg``)."""
     return subprocess.Popen(
         [*PNEU, *argv],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        start_new_session=new_session,
     )
 
 
@@ -46,3 +49,28 @@ def wait_for(cond, timeout: float = 120.0, poll: float = 0.002) -> bool:
 def finish(proc: subprocess.Popen, timeout: float = 300.0) -> tuple[int, str, str]:
     out, err = proc.communicate(timeout=timeout)
     return proc.returncode, out, err
+
+
+def children(pid: int) -> list[int]:
+    """The live child processes of ``pid`` (from /proc)."""
+    out = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            stat = (d / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat.rsplit(")", 1)[1].split()  # after "(comm)": state, ppid, ...
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.append(int(d.name))
+    return out
+
+
+def alive(pid: int) -> bool:
+    """Is ``pid`` a live process (not gone, not a zombie)?"""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"

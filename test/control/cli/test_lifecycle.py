@@ -153,3 +153,33 @@ def test_a_foreign_bag_is_named_as_such(tmp_path, capsys):
         argv = [*cmd, str(bag)] + (["--out", str(tmp_path / "x.mcap")] if cmd == ["replay"] else [])
         refused(capsys, argv, str(bag), "not a pneu run: no /pneu topics; found /chatter "
                 "(std_msgs/msg/String)")  # fmt: skip
+
+
+def test_the_newer_commands_claim_their_outputs_the_same_way(done, tmp_path, capsys):
+    """sweep, excite, rig, validate, identify: a non-empty output refused unless --overwrite,
+    an output that is an input refused always, the files there untouched."""
+    bag = str(done / "run.mcap")
+    d = tmp_path / "d"
+    d.mkdir()
+    (d / "keep.txt").write_text("mine\n")
+    sweep = ["sweep", "--samples", "1", "--reference", "sine:amplitude=10,frequency_hz=1",
+             "--duration", "0.05", "--controller", "pid", "--gains", "retuned",
+             "--executor", "serial", "--no-plots"]  # fmt: skip
+    rig = ["rig", "--backend", "sim:seed=1", "--axis", "linear", "--duration", "0.05"]
+    for argv in (sweep, ["excite", "--level", "quick"], rig, ["validate", bag]):
+        refused(capsys, [*argv, "--out", str(d)], "--out", "--overwrite", "keep.txt")
+    # with --overwrite: their own files replaced, others left alone (quick ones only)
+    for argv, names in ((sweep, ["summary.json", "summary.md", "sweep.csv", "envelopes.npz"]),
+                        (rig, ["loop.json", "run.mcap"]), (["validate", bag], ["validate.json"])):  # fmt: skip
+        assert main([*argv, "--out", str(d), "--overwrite"]) == 0
+        assert (d / "keep.txt").read_text() == "mine\n"
+        assert all((d / n).is_file() for n in names), sorted(p.name for p in d.iterdir())
+        assert not list(d.glob("*.partial")) and not (d / ".pneu.lock").exists()
+    # an output that is an input: never
+    plant = tmp_path / "p.yaml"
+    plant.write_text("keep\n")
+    refused(capsys, ["identify", bag, "--out", str(plant)], "--out", "--overwrite")
+    refused(capsys, ["identify", bag, "--base", str(plant), "--out", str(plant), "--force"],
+            "--out", "inputs")  # fmt: skip
+    refused(capsys, ["identify", bag, "--out", str(tmp_path / "p.txt")], "--out", ".yaml")
+    assert plant.read_text() == "keep\n" and not (tmp_path / "p.txt").exists()

@@ -9,8 +9,8 @@ Arguments are generated around a valid base command of each subcommand: numbers
 (NaN, inf, huge, negative, not numbers), ``KIND:k=v`` specs with known and
 unknown keys, ``--set`` pairs, paths (missing, a directory, a corrupt bag, a
 foreign bag, a YAML file), and config files with one key given a generated
-value, deleted or given twice. Long commands (paper, tune, bench) only get
-refusals: a valid example would run for minutes.
+value, deleted or given twice. Long commands (paper, tune, excite, identify,
+bench) only get refusals: a valid example would run for minutes.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from pneu_control.cli.main import main
 from pneu_msgs_py.params.paths import config_file
 
 DOCUMENTED = {0, 2, 3}  # 1 would be a runtime error (a bug here); 129/130/143 need a signal
+ALSO_DOCUMENTED = {"validate": {1}}  # validate --min-fit: exit 1 when a held-out fit is below
 SETTINGS = settings(
     max_examples=20,  # per subcommand and per config file: ~25 s of the suite in all
     deadline=None,
@@ -127,7 +128,32 @@ def option_values(bags) -> dict[str, st.SearchStrategy]:
         "--only": st.one_of(st.sampled_from(["sine_20mm_0p25hz", "speed_800rpm"]), TEXT),
         "--config-dir": paths,
         "--algorithm": TEXT,
+        # sweep: a valid example is one or two short runs in this process
+        "--samples": st.one_of(
+            st.integers(min_value=1, max_value=2).map(str),
+            NUMBERISH.filter(lambda v: not _is_valid_int(v, 3, 10_000)),
+        ),
+        "--workers": NUMBERISH,
+        "--experiment": st.one_of(st.sampled_from(["sine_20mm_0p25hz", "speed_800rpm"]), TEXT),
+        "--gains": st.one_of(st.sampled_from(["paper", "retuned", "design"]), TEXT),
+        "--rig": paths,
+        "--base": paths,
+        "--max-steps": NUMBERISH,
+        "--level": st.one_of(st.sampled_from(["full", "quick"]), TEXT),
+        "--horizon": NUMBERISH,
+        "--min-fit": NUMBERISH,
+        "--mode": st.one_of(st.sampled_from(["open", "closed", "auto"]), TEXT),
+        "--hold": st.builds(
+            lambda a, v: f"{a}={v}", st.sampled_from(["linear", "rotary", "x"]), NUMBERISH
+        ),
     }
+
+
+def _is_valid_int(v: str, lo: int, hi: int) -> bool:
+    try:
+        return lo <= int(v) <= hi
+    except ValueError:
+        return False
 
 
 def _is_long_valid_duration(v: str) -> bool:
@@ -139,21 +165,49 @@ def _is_long_valid_duration(v: str) -> bool:
 
 
 # per subcommand: (base argv before the output, output option or None, options it takes,
-# long-running: only refusals are generated)
+# None, or the option given a refused value in every example: a valid example would run for
+# minutes)
+SWEEP = [
+    "--samples",
+    "1",
+    "--reference",
+    "sine:amplitude=10,frequency_hz=1",
+    "--controller",
+    "pid",
+    "--gains",
+    "retuned",
+    "--executor",
+    "serial",
+    "--no-plots",
+    "--duration",
+    "0.05",
+]
 COMMANDS = {
     "run": (["--axis", "linear", "--controller", "pid", "--duration", "0.05"], "--out",
             ["--duration", "--seed", "--window-start", "--axis", "--controller", "--reference",
-             "--fault", "--set", "--plant", "--controllers", "--safety"], False),
+             "--fault", "--set", "--plant", "--controllers", "--safety"], None),
     "sim": (["--duration", "0.05", "--no-plot"], "--out",
-            ["--duration", "--seed", "--linear-voltage", "--rotary-voltage", "--plant"], False),
-    "analyze": (["{bag}"], None, ["--window-start"], False),
-    "plot": (["{bag}"], "--out", [], False),
-    "compare": (["{bag}", "{bag}"], "--out", [], False),
-    "replay": (["{bag}"], "--out", ["--controller", "--axis", "--set"], False),
-    "recover": (["{bag}"], "--out", [], False),
-    "paper": ([], "--out", ["--seed", "--seeds", "--plant", "--config-dir", "--only"], True),
-    "tune": ([], "--out", ["--plant", "--controllers", "--axis", "--algorithm"], True),
+            ["--duration", "--seed", "--linear-voltage", "--rotary-voltage", "--plant"], None),
+    "analyze": (["{bag}"], None, ["--window-start"], None),
+    "plot": (["{bag}"], "--out", [], None),
+    "compare": (["{bag}", "{bag}"], "--out", [], None),
+    "replay": (["{bag}"], "--out", ["--controller", "--axis", "--set"], None),
+    "recover": (["{bag}"], "--out", [], None),
+    "paper": ([], "--out", ["--seed", "--seeds", "--plant", "--config-dir", "--only"], "--plant"),
+    "tune": ([], "--out", ["--plant", "--controllers", "--axis", "--algorithm"], "--plant"),
+    "sweep": (SWEEP, "--out", ["--duration", "--samples", "--seed", "--window-start",
+                               "--reference", "--set", "--plant", "--workers", "--gains",
+                               "--experiment", "--config-dir"], None),
+    "excite": ([], "--out", ["--seed", "--axis", "--level", "--safety"], "--plant"),
+    "identify": (["{bag}"], "--out", ["--axis", "--max-steps"], "--base"),
+    "validate": (["{bag}"], "--out", ["--plant", "--mode", "--horizon", "--min-fit"], None),
+    "rig": (["--backend", "sim:seed=1", "--axis", "linear", "--controller", "pid",
+             "--duration", "0.05"], "--out",
+            ["--duration", "--axis", "--reference", "--set", "--controllers", "--safety",
+             "--rig", "--hold"], None),
+    "bench": (["--quick"], None, [], "--only"),
 }  # fmt: skip
+EXAMPLES = {"sweep": 10, "rig": 10, "validate": 10}  # fewer: each valid one runs for ~1 s
 
 
 def invoke(argv: list[str]) -> tuple[int, str, str]:
@@ -171,7 +225,7 @@ def invoke(argv: list[str]) -> tuple[int, str, str]:
 def check(cmd: str, argv: list[str], changed: list[str], out_path: Path | None) -> int:
     rc, _, err = invoke(argv)
     assert "Traceback" not in err and "internal error" not in err, (argv, err)
-    assert rc in DOCUMENTED, (argv, rc, err)
+    assert rc in DOCUMENTED | ALSO_DOCUMENTED.get(cmd, set()), (argv, rc, err)
     if rc == 2:
         lines = [ln for ln in err.strip().splitlines() if not ln.startswith("pneu: warning:")]
         assert len(lines) == 1, (argv, err)
@@ -189,7 +243,7 @@ def check(cmd: str, argv: list[str], changed: list[str], out_path: Path | None) 
 
 @st.composite
 def command_line(draw, bags, cmd: str):
-    base, out_opt, opts, long_running = COMMANDS[cmd]
+    base, out_opt, opts, refuse = COMMANDS[cmd]
     values = option_values(bags)
     bag_choice = st.sampled_from(list(bags))
     argv = [cmd]
@@ -212,10 +266,13 @@ def command_line(draw, bags, cmd: str):
         elif opt in ("--reference", "--fault"):
             kind, _, rest = v.partition(":")
             changed += [kind.strip(), *(p.partition("=")[0].strip() for p in rest.split(","))]
-    if long_running:  # always one refusal: a valid paper or tune would run for minutes
+    if refuse == "--only":  # always one refusal: a valid example would run for minutes
+        argv += ["--only", draw(TEXT.filter(lambda v: not v.startswith("-")))]
+        changed.append(refuse)
+    elif refuse:
         bad = draw(st.sampled_from(["corrupt", "foreign", "text", "empty", "missing", "dir"]))
-        argv += ["--plant", bags[bad]]
-        changed.append("--plant")
+        argv += [refuse, bags[bad]]
+        changed.append(refuse)
     return argv, changed, out_opt
 
 
@@ -225,7 +282,7 @@ def run_example(bags, cmd, drawn) -> None:
         out_path = None
         if out_opt is not None:
             suffix = {"plot": "fig.png", "replay": "new.mcap", "recover": "new.mcap",
-                      "tune": "t.yaml"}.get(cmd, "out")  # fmt: skip
+                      "tune": "t.yaml", "identify": "p.yaml"}.get(cmd, "out")  # fmt: skip
             out_path = Path(tmp) / suffix
             argv = [*argv, out_opt, str(out_path)]
             changed = [*changed, out_opt]
@@ -234,7 +291,7 @@ def run_example(bags, cmd, drawn) -> None:
 
 @pytest.mark.parametrize("cmd", list(COMMANDS))
 def test_generated_arguments(bags, cmd):
-    @SETTINGS
+    @settings(SETTINGS, max_examples=EXAMPLES.get(cmd, SETTINGS.max_examples))
     @given(drawn=command_line(bags, cmd))
     def prop(drawn):
         run_example(bags, cmd, drawn)

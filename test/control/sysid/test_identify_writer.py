@@ -8,6 +8,7 @@ import yaml
 from pneu_control.sysid import model
 from pneu_control.sysid.fit import AxisFit
 from pneu_control.sysid.identify import Identification, NoiseEstimate, write_plant
+from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.paths import config_file
 from pneu_sim.physics.plant_file import load_plant
 
@@ -78,6 +79,15 @@ def test_never_overwrites(tmp_path):
     base = load_plant()
     tree = yaml.safe_load(config_file("plant.yaml").read_text())
     (tmp_path / "p.yaml").write_text("keep me\n")
-    with pytest.raises(FileExistsError, match="refusing to overwrite"):
+    with pytest.raises(ParamError, match=r"a new file, or --overwrite to replace it"):
         write_plant(_ident(base), tree, tmp_path / "p.yaml")
     assert (tmp_path / "p.yaml").read_text() == "keep me\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.yaml"]  # no report, no partial
+    # a report left beside it is refused the same way (the pair is written together)
+    (tmp_path / "q.identify.json").write_text("{}\n")
+    with pytest.raises(ParamError, match=r"q\.identify\.json"):
+        write_plant(_ident(base), tree, tmp_path / "q.yaml")
+    assert not (tmp_path / "q.yaml").exists()
+    out = write_plant(_ident(base), tree, tmp_path / "p.yaml", overwrite=True)
+    assert out.read_text().startswith("# Plant") and (tmp_path / "p.identify.json").is_file()
+    assert not list(tmp_path.glob("*.partial")) and not list(tmp_path.glob(".*lock"))

@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
-from pathlib import Path
+
+from pneu_msgs_py.lifecycle import exits, signals
+from pneu_msgs_py.params.yaml_file import from_option
+
+from pneu_control.experiment import session
 
 NAME = "excite"
 HELP = (
@@ -16,9 +21,22 @@ HELP = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axis", choices=("linear", "rotary", "both"), default="both")
-    p.add_argument("--out", required=True, metavar="DIR", help="directory of run.mcap")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="run directory: new or empty (or --overwrite); gets run.mcap, metrics.json, "
+        "timeseries.npz",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the pneu outputs of a previous run in DIR (other files are left alone)",
+    )
     p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
-    p.add_argument("--seed", type=int, default=0, help="design and noise seed")
+    p.add_argument(
+        "--seed", type=int, default=0, help="design and noise seed, an integer in [0, 2^32 - 1]"
+    )
     p.add_argument(
         "--level",
         choices=("full", "quick"),
@@ -34,13 +52,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pneu_driver.safety import load_safety_params
+    from pneu_msgs_py.lifecycle.duration import check_duration
     from pneu_sim.physics.plant_file import load_plant
 
     from pneu_control.sysid.excite import excitation_spec, run_excitation
 
+    # everything checked before anything is written: the output, the seed, every file
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
-    plant = load_plant(args.plant)
+    claim = session.run_dir(
+        args.out, overwrite=args.overwrite, inputs=(args.plant, args.safety)
+    ).check()
+    session.check_seed(args.seed)
+    with from_option("--plant" if args.plant else None):
+        plant = load_plant(args.plant)
+    with from_option("--safety" if args.safety else None):
+        load_safety_params(args.safety)
     spec = excitation_spec(axes, plant, seed=args.seed, level=args.level, safety_file=args.safety)
+    check_duration(spec.duration_s, "--level")  # the designs stay under the one cap
     for axis, d in spec.controllers.items():
         kinds = {}
         for s in d.segments:
@@ -51,16 +80,19 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     t0 = time.perf_counter()
-    result = run_excitation(spec, args.out, progress=True, hide_plant=args.hide_plant)
+    result = run_excitation(spec, claim, progress=True, hide_plant=args.hide_plant)
     trips = [e for e in result.safety_events if e.level != "OK"]
     for e in trips:
         print(
             f"  supervisor: {e.axis} {e.rule} at {e.stamp_ns * 1e-9:.3f} s: {e.message}",
             file=sys.stderr,
         )
-    out = Path(args.out) / "run.mcap"
+    out = claim.final("run.mcap")
     print(
-        f"wrote {out} ({spec.duration_s:.1f} s simulated in {time.perf_counter() - t0:.1f} s"
+        f"wrote {out} ({result.end['last_sample_s']:.1f} of {spec.duration_s:.1f} s simulated "
+        f"in {time.perf_counter() - t0:.1f} s"
         f"{', interrupted' if result.interrupted else ''}; {len(trips)} supervisor events)"
     )
-    return 130 if result.interrupted else 0
+    if result.interrupted:
+        return exits.interrupted_code(signals.pending() or signal.SIGINT)
+    return exits.OK

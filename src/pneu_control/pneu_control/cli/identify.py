@@ -7,6 +7,9 @@ import sys
 import time
 from pathlib import Path
 
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.params.core import ParamError
+
 NAME = "identify"
 HELP = (
     "output-error fit of the twin to bags (valve flow curve, leakage, friction, motor inertia, "
@@ -16,12 +19,25 @@ HELP = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bags", nargs="+", metavar="BAG", help=".mcap files or rosbag2 directories")
-    p.add_argument("--out", required=True, metavar="YAML", help="the identified plant.yaml")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="YAML",
+        help="the identified plant.yaml (and beside it NAME.identify.json): new files, or "
+        "--overwrite",
+    )
     p.add_argument("--base", default=None, metavar="YAML", help="start values (config/plant.yaml)")
     p.add_argument("--axis", choices=("linear", "rotary", "both"), default=None,
                    help="axes to identify (default: every excited axis in the bags)")  # fmt: skip
-    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
-    p.add_argument("--max-steps", type=int, default=40, metavar="N", help="cap on the least-squares function evaluations of each stage")  # fmt: skip
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace --out (and its .identify.json)"
+    )
+    p.add_argument("--force", dest="overwrite", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--max-steps", type=int, default=40, metavar="N",
+                   help=f"cap on the least-squares function evaluations of each stage, [1, {MAX_STEPS}]")  # fmt: skip
+
+
+MAX_STEPS = 10_000  # bounded: each evaluation replays every bag
 
 
 def _resolve(bag: str) -> str:
@@ -32,24 +48,28 @@ def _resolve(bag: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    import yaml
     from pneu_msgs_py.params.paths import config_file
+    from pneu_msgs_py.params.yaml_file import from_option, load_yaml, located
     from pneu_sim.physics.plant_file import params_from_tree
 
     from pneu_control.sysid.fit import FitOptions
-    from pneu_control.sysid.identify import identify, write_plant
+    from pneu_control.sysid.identify import identify, output_claims, write_plant
     from pneu_control.sysid.record import load_record
 
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise FileExistsError(f"--out {out} exists; refusing to overwrite it (use --force)")
+    # everything checked before anything is written: options, the output, the base file, bags
+    if not 1 <= args.max_steps <= MAX_STEPS:
+        raise ParamError("--max-steps", args.max_steps, f"an integer in [1, {MAX_STEPS}]")
+    bags = [_resolve(b) for b in args.bags]
     base_path = Path(args.base) if args.base else config_file("plant.yaml")
-    base_tree = yaml.safe_load(base_path.read_text())
-    base = params_from_tree(base_tree)
+    out_claims = output_claims(args.out, overwrite=args.overwrite, inputs=[*bags, base_path])
+    with from_option("--base" if args.base else None):
+        base_tree = load_yaml(base_path)
+        with located(base_path, base_tree):
+            base = params_from_tree(base_tree if base_tree is not None else {})
     t0 = time.perf_counter()
     records = []
-    for bag in args.bags:
-        rec = load_record(_resolve(bag))
+    for bag in bags:
+        rec = load_record(bag)
         print(
             f"read {rec.path}: {rec.n} samples, axes {', '.join(rec.commanded) or '-'}",
             file=sys.stderr,
@@ -69,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
         options=FitOptions(max_nfev=args.max_steps),
         log=lambda m: print(m, file=sys.stderr),
     )
-    path = write_plant(ident, base_tree, out, force=args.force)
+    with signals.deferred():  # both files finished (or neither), whatever signal comes
+        path = write_plant(ident, base_tree, out_claims)
     print(ident.report())
     for note in ident.notes:
         print(f"note: {note}")

@@ -3,7 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+
+from pneu_msgs_py.lifecycle import exits, signals
+from pneu_msgs_py.lifecycle.duration import MAX_DURATION_S, check_duration
+from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.experiment import session
 
@@ -27,11 +32,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--controllers", default=None, metavar="FILE", help="controllers.yaml")
     p.add_argument(
-        "--duration", type=float, default=10.0, metavar="S", help="seconds (0: until Ctrl-C)"
+        "--duration",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="seconds, [0.01, 600] (the duration cap of every command); 0: until Ctrl-C "
+        "(at most 600 s)",
     )
     p.add_argument("--rig", default=None, metavar="FILE", help="rig.yaml (default: config/)")
     p.add_argument("--safety", default=None, metavar="FILE", help="safety.yaml")
-    p.add_argument("--out", default=None, metavar="DIR", help="write run.mcap and loop.json here")
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="new or empty directory (or --overwrite): run.mcap and loop.json",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of a previous pneu rig in DIR (other files are left alone)",
+    )
     p.add_argument(
         "--hold",
         default="",
@@ -63,40 +83,49 @@ def parse_hold(text: str) -> dict[str, float]:
 def run(args: argparse.Namespace) -> int:
     from pneu_driver.daq.rig import load_rig_params
 
-    from pneu_control.experiment.rig_run import run_rig
+    from pneu_control.experiment.rig_run import rig_dir, run_rig
 
-    if args.duration < 0:
-        raise ValueError(
-            f"--duration: {args.duration!r} refused; allowed: >= 0 s (0: until Ctrl-C)"
-        )
+    # everything checked before anything is written: options, the output, every file
+    until_stopped = args.duration == 0
+    duration_s = MAX_DURATION_S if until_stopped else check_duration(args.duration)
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
     hold = parse_hold(args.hold)
+    claim = None
+    if args.out is not None:
+        claim = rig_dir(
+            args.out, overwrite=args.overwrite, inputs=(args.controllers, args.rig, args.safety)
+        ).check()
     spec = session.build_spec(
         axes=tuple(a for a in axes if a not in hold) or axes,
         controller=args.controller,
         reference=args.reference,
         sets=args.set,
-        duration_s=args.duration or 1.0,
+        duration_s=duration_s,
         controllers_file=args.controllers,
         name="rig",
         safety_file=args.safety,
     )
-    rig = load_rig_params(args.rig)
+    with from_option("--rig" if args.rig else None):
+        rig = load_rig_params(args.rig)
     echo = session.config_echo(spec) | {"backend": args.backend}
-    print(f"pneu rig: backend {args.backend}, axes {', '.join(axes)}", file=sys.stderr)
+    print(
+        f"pneu rig: backend {args.backend}, axes {', '.join(axes)}"
+        + (f", until Ctrl-C (at most {MAX_DURATION_S:g} s)" if until_stopped else ""),
+        file=sys.stderr,
+    )
     result = run_rig(
         args.backend,
         spec,
         rig,
-        duration_s=args.duration or None,
-        out_dir=args.out,
+        duration_s=duration_s,
+        out_dir=claim,
         echo=echo | {"hold": hold},
         hold=hold,
     )
     d = result.diagnostics
     if result.error is not None and d["cycles"] == "0":  # the DAQ never opened
         print(f"pneu rig: error: {result.error}", file=sys.stderr)
-        return 1
+        return exits.RUNTIME_ERROR
     print(
         f"cycles {d['cycles']}  late {d['late_cycles']}  missed ticks {d['missed_ticks']}  "
         f"DAQmx late {d['daq_late_errors']} ({d['daq_late_codes'] or '-'})  "
@@ -107,7 +136,16 @@ def run(args: argparse.Namespace) -> int:
         print(f"safety  {axis:7s} {d[f'{axis}.state']} {d[f'{axis}.causes']}")
     if result.bag is not None:
         print(f"wrote {result.bag}", file=sys.stderr)
+    if result.interrupted:
+        end = result.end
+        print(
+            f"interrupted by {end['signal'] or 'SIGINT'} at {end['last_sample_s']:.3f} s: "
+            "the valves are safe; the bag and loop.json of what ran are complete "
+            "(interrupted: true)",
+            file=sys.stderr,
+        )
+        return exits.interrupted_code(signals.pending() or signal.SIGINT)
     if result.error is not None:
         print(f"pneu rig: error: {result.error}", file=sys.stderr)
-        return 1
-    return 0
+        return exits.RUNTIME_ERROR
+    return exits.OK

@@ -7,6 +7,12 @@ import sys
 import time
 from pathlib import Path
 
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.duration import check_duration
+from pneu_msgs_py.lifecycle.outputs import OutputDir
+from pneu_msgs_py.params.core import ParamError
+
+from pneu_control.experiment import session
 from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, experiment_by_id
 
 NAME = "sweep"
@@ -37,9 +43,30 @@ def add_executor_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sampler", choices=("lhs", "sobol"), default="lhs")
 
 
+MAX_SAMPLES = 10_000  # plant samples: bounded resources (the rows and envelopes stay in memory)
+MAX_WORKERS = 1024
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--out", required=True, metavar="DIR")
-    p.add_argument("--samples", type=int, required=True, metavar="N", help="plant samples")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="new or empty directory (or --overwrite): sweep.csv, envelopes.npz, summary.json, "
+        "summary.md, band figures",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of a previous pneu sweep in DIR (other files are left alone)",
+    )
+    p.add_argument(
+        "--samples",
+        type=int,
+        required=True,
+        metavar="N",
+        help=f"plant samples, [1, {MAX_SAMPLES}]",
+    )
     p.add_argument(
         "--seed", type=int, default=0, help="seed of the design; sample s runs with seed+s"
     )
@@ -58,7 +85,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="instead, one pneu run experiment with this reference (with --axis, --duration)",
     )
     p.add_argument("--axis", choices=("linear", "rotary"), default="linear")
-    p.add_argument("--duration", type=float, default=20.0, metavar="S")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=20.0,
+        metavar="S",
+        help="with --reference: simulated seconds per run, [0.01, 600] (the duration cap)",
+    )
     p.add_argument("--window-start", type=float, default=None, metavar="S")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument(
@@ -100,21 +133,34 @@ def progress_printer(label: str):
 
 def check_executor_args(args: argparse.Namespace) -> None:
     if args.address is not None and args.executor != "dask":
-        raise ValueError(f"--address: {args.address!r} refused; allowed: with --executor dask")
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers: {args.workers} refused; allowed: an integer >= 1")
+        raise ParamError("--address", args.address, "with --executor dask")
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise ParamError("--workers", args.workers, f"an integer in [1, {MAX_WORKERS}]")
 
 
 def run(args: argparse.Namespace) -> int:
     from pneu_control.sweep.engine import custom_experiment, plan_sweep, run_sweep
-    from pneu_control.sweep.report import write_sweep
+    from pneu_control.sweep.report import sweep_artefacts, write_sweep
 
-    if args.samples < 1:
-        raise ValueError(f"--samples: {args.samples} refused; allowed: an integer >= 1")
+    # everything checked before anything is written: options, the output, every file
+    if not 1 <= args.samples <= MAX_SAMPLES:
+        raise ParamError("--samples", args.samples, f"an integer in [1, {MAX_SAMPLES}]")
+    session.check_seed(args.seed)
+    session.check_seed(args.seed + args.samples - 1, "--seed + --samples - 1")
+    check_duration(args.duration)
     check_executor_args(args)
     if args.reference and args.experiment:
-        raise ValueError("--reference: refused with --experiment; allowed: one or the other")
+        raise ParamError("--reference", args.reference, "one or the other of it and --experiment")
+    if args.window_start is not None and not args.reference:
+        raise ParamError("--window-start", args.window_start, "only with --reference")
+    if args.config_dir and not Path(args.config_dir).is_dir():
+        raise ParamError("--config-dir", args.config_dir, "a directory holding controllers*.yaml")
     cfg = Path(args.config_dir) if args.config_dir else None
+    ids = ["custom"] if args.reference else (args.experiment or [e.id for e in PAPER_EXPERIMENTS])
+    exps = [] if args.reference else [experiment_by_id(i, "--experiment") for i in ids]
+    claim = OutputDir(
+        args.out, sweep_artefacts(ids), overwrite=args.overwrite, inputs=[args.plant]
+    ).check()
     if args.reference:
         exps = [
             custom_experiment(
@@ -125,10 +171,6 @@ def run(args: argparse.Namespace) -> int:
                 config_dir=cfg,
             )
         ]
-    else:
-        exps = [experiment_by_id(i, "--experiment") for i in args.experiment] or list(
-            PAPER_EXPERIMENTS
-        )
     t0 = time.perf_counter()
     plan = plan_sweep(
         samples=args.samples,
@@ -148,14 +190,21 @@ def run(args: argparse.Namespace) -> int:
         f"seed {args.seed}) on {args.executor}",
         file=sys.stderr,
     )
-    result = run_sweep(
-        plan,
-        executor=args.executor,
-        workers=args.workers,
-        address=args.address,
-        progress=progress_printer("sweep"),
-    )
-    _, _, md = write_sweep(result, args.out, plots=not args.no_plots)
+    with claim:
+        try:
+            # a signal here raises at once: the executor stops its workers, nothing is written
+            result = run_sweep(
+                plan,
+                executor=args.executor,
+                workers=args.workers,
+                address=args.address,
+                progress=progress_printer("sweep"),
+            )
+        except BaseException:
+            claim.discard()
+            raise
+        with signals.deferred():  # every file finished; a signal now ends the command after
+            _, _, md = write_sweep(result, claim.path, plots=not args.no_plots)
     print(md)
     wall = time.perf_counter() - t0
     print(

@@ -8,6 +8,11 @@ import math
 import sys
 from pathlib import Path
 
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.outputs import OutputDir
+from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.yaml_file import from_option
+
 NAME = "validate"
 HELP = "replay bags through a twin (open loop on the recorded voltages, or closed loop) and report the fit %% per signal"
 
@@ -20,7 +25,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "or excitation again; auto: closed where the bag says what ran")  # fmt: skip
     p.add_argument("--horizon", type=float, default=math.inf, metavar="S",
                    help="open loop: restart from the measured state every S seconds (default: never)")  # fmt: skip
-    p.add_argument("--out", default=None, metavar="DIR", help="overlay figures and validate.json")
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="new or empty directory (or --overwrite): overlay figures and validate.json",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of a previous pneu validate in DIR",
+    )
     p.add_argument("--min-fit", type=float, default=None, metavar="PCT",
                    help="exit 1 if a held-out bag's signal fits below PCT")  # fmt: skip
 
@@ -32,7 +47,17 @@ def _used_by_identify(plant_file: str | None) -> set[str]:
     rep = Path(plant_file).with_suffix(".identify.json")
     if not rep.is_file():
         return set()
-    return {str(Path(b).resolve()) for b in json.loads(rep.read_text()).get("bags", [])}
+    try:
+        doc = json.loads(rep.read_text(encoding="utf-8"))
+        return {str(Path(b).resolve()) for b in doc.get("bags", [])}
+    except (OSError, ValueError, TypeError, AttributeError) as err:
+        raise ParamError(
+            "--plant", str(rep), f"a report of pneu identify beside the plant file ({err})"
+        ) from None
+
+
+def _figure(i: int, bag: str) -> str:
+    return f"validate_{i:02d}_{Path(bag).parent.name}.png"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,21 +67,37 @@ def run(args: argparse.Namespace) -> int:
     from pneu_control.sysid.record import load_record
     from pneu_control.sysid.validate import plot_validation, validate_record, write_report
 
-    plant = load_plant(args.plant)
+    # everything checked before anything is written: options, the output, the plant file
+    if math.isnan(args.horizon) or args.horizon <= 0:
+        raise ParamError("--horizon", args.horizon, "> 0 s (inf: never restart)")
+    if args.min_fit is not None and not math.isfinite(args.min_fit):
+        raise ParamError("--min-fit", args.min_fit, "a finite percentage (fits are <= 100 %)")
+    bags = [_resolve(b) for b in args.bags]
+    claim = None
+    if args.out:
+        names = ["validate.json", *(_figure(i, b) for i, b in enumerate(bags))]
+        claim = OutputDir(
+            args.out, names, overwrite=args.overwrite, inputs=[*bags, args.plant]
+        ).check()
+    with from_option("--plant" if args.plant else None):
+        plant = load_plant(args.plant)
     used = _used_by_identify(args.plant)
-    out = Path(args.out) if args.out else None
-    if out:
-        out.mkdir(parents=True, exist_ok=True)
     results = []
-    for i, bag in enumerate(args.bags):
-        rec = load_record(_resolve(bag))
+    for bag in bags:
+        rec = load_record(bag)
         held = str(Path(rec.path).resolve()) not in used
-        v = validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
-        if out:
-            v.figure = str(
-                plot_validation(v, out / f"validate_{i:02d}_{Path(rec.path).parent.name}.png")
-            )
-        results.append(v)
+        results.append(
+            validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
+        )
+    if claim is not None:
+        with claim, signals.deferred():  # every file finished, whatever signal comes
+            for i, (v, bag) in enumerate(zip(results, bags)):
+                name = _figure(i, bag)
+                plot_validation(v, claim.partial(name))
+                claim.publish(name)
+                v.figure = str(claim.final(name))
+            write_report(results, claim.partial("validate.json"))
+            claim.publish("validate.json")
     names = ["x", "p_c1", "p_c2", "p_m1", "omega"]
     print(
         "| bag | held out | mode | "
@@ -80,9 +121,11 @@ def run(args: argparse.Namespace) -> int:
             "warning: every bag was used by identify; a validation needs held-out bags",
             file=sys.stderr,
         )
-    if out:
-        write_report(results, out / "validate.json")
-        print(f"wrote {out}/validate.json and {len(results)} overlay figure(s)", file=sys.stderr)
+    if claim is not None:
+        print(
+            f"wrote {claim.path}/validate.json and {len(results)} overlay figure(s)",
+            file=sys.stderr,
+        )
     if args.min_fit is not None and worst < args.min_fit:
         print(
             f"pneu validate: a held-out fit is {worst:.1f} % < {args.min_fit:g} %", file=sys.stderr

@@ -18,6 +18,12 @@ executor (tested).
 
 A task that hangs or a worker that dies never hangs the sweep: every wait has
 a timeout (``timeout_s``, for the whole map).
+
+An interruption (SIGINT, SIGTERM, SIGHUP: :class:`~pneu_msgs_py.lifecycle.signals.Interrupted`
+raised in the waiting driver) leaves no worker behind: local workers ignore the
+terminal's SIGINT (the driver decides) and are terminated and reaped, queued
+runs cancelled; a local Dask cluster is closed (its nannies stop their workers);
+on a remote cluster the sweep's futures are cancelled.
 """
 
 from __future__ import annotations
@@ -77,24 +83,56 @@ def map_tasks(
     return _map_dask(fn, tasks, workers, address, timeout_s, progress, client)
 
 
+def _worker_init() -> None:
+    """A local worker leaves SIGINT and SIGHUP to the driver (a terminal sends them to the
+    whole process group); the driver stops it with SIGTERM."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+
+def _stop_pool(pool: Any) -> None:
+    """Cancel what is queued, terminate the workers and reap them (no process left behind)."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(timeout=5.0)
+        if p.is_alive():
+            p.kill()
+            p.join(timeout=5.0)
+
+
 def _map_local(fn, tasks, workers, timeout_s, progress) -> list[Any]:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures import TimeoutError as FuturesTimeout
 
+    from pneu_msgs_py.lifecycle import signals
+
     out: list[Any] = [None] * len(tasks)
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx) as pool:
+    pool = ProcessPoolExecutor(
+        max_workers=min(workers, len(tasks)), mp_context=ctx, initializer=_worker_init
+    )
+    try:
         futs = {pool.submit(fn, t): i for i, t in enumerate(tasks)}
-        try:
-            for n, fut in enumerate(as_completed(futs, timeout=timeout_s), start=1):
-                out[futs[fut]] = fut.result()
-                if progress is not None:
-                    progress(n, len(tasks))
-        except FuturesTimeout:
-            for fut in futs:
-                fut.cancel()
-            raise SweepExecutorError(f"sweep: runs not finished after {timeout_s:g} s") from None
+        for n, fut in enumerate(as_completed(futs, timeout=timeout_s), start=1):
+            out[futs[fut]] = fut.result()
+            if progress is not None:
+                progress(n, len(tasks))
+    except FuturesTimeout:
+        with signals.deferred():
+            _stop_pool(pool)
+        raise SweepExecutorError(f"sweep: runs not finished after {timeout_s:g} s") from None
+    except BaseException:  # interrupted, or a run failed: stop the others now
+        with signals.deferred():  # a second signal cannot cut the clean-up short
+            _stop_pool(pool)
+        raise
+    pool.shutdown(wait=True)
     return out
 
 
@@ -116,18 +154,25 @@ def _map_dask(fn, tasks, workers, address, timeout_s, progress, client) -> list[
         with cl:
             cl.get_versions(check=True)
             return _gather(distributed, cl, fn, tasks, timeout_s, progress)
+    from pneu_msgs_py.lifecycle import signals
+
     n = min(workers or default_workers(), len(tasks))
-    with (
-        distributed.LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address=None,
-        ) as cluster,
-        distributed.Client(cluster) as cl,
-    ):
+    cluster = distributed.LocalCluster(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address=None,
+    )
+    cl = None
+    try:
+        cl = distributed.Client(cluster)
         return _gather(distributed, cl, fn, tasks, timeout_s, progress)
+    finally:
+        with signals.deferred():  # closed whatever happened; a second signal waits
+            if cl is not None:
+                cl.close()
+            cluster.close()
 
 
 def _gather(distributed, client, fn, tasks, timeout_s, progress) -> list[Any]:
@@ -144,4 +189,10 @@ def _gather(distributed, client, fn, tasks, timeout_s, progress) -> list[Any]:
     except TimeoutError:
         client.cancel(futs)
         raise SweepExecutorError(f"sweep: runs not finished after {timeout_s:g} s") from None
+    except BaseException:  # interrupted: the sweep's runs are not left queued on the cluster
+        from pneu_msgs_py.lifecycle import signals
+
+        with signals.deferred():
+            client.cancel(futs)
+        raise
     return out

@@ -5,6 +5,12 @@
 ``<out>/<experiment>__bands.png`` (:mod:`.figures`). Everything but the wall
 time in summary.json is a function of the plan: the same seed gives the same
 bytes.
+
+Every file is written as ``NAME.partial`` and the whole set renamed when the
+last one is complete (:data:`pneu_msgs_py.lifecycle.outputs.PARTIAL`): the
+directory holds a finished sweep, or partial files that say so. Callers write
+inside :func:`pneu_msgs_py.lifecycle.signals.deferred`, so a signal never cuts
+a file.
 """
 
 from __future__ import annotations
@@ -12,16 +18,25 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pneu_msgs_py.lifecycle.outputs import PARTIAL
 
 from pneu_control.sweep.engine import SweepResult
 from pneu_control.sweep.summary import render_summary, summarise
 from pneu_control.sweep.table import read_table, table_text, write_envelopes
 
-__all__ = ["write_sweep"]
+__all__ = ["SWEEP_FILES", "sweep_artefacts", "write_sweep"]
+
+SWEEP_FILES = ("sweep.csv", "envelopes.npz", "summary.md", "summary.json")
+
+
+def sweep_artefacts(experiment_ids: list[str]) -> tuple[str, ...]:
+    """Every file name a sweep of these experiments may write (for the output claim)."""
+    return (*SWEEP_FILES, *(f"{e}__bands.png" for e in experiment_ids))
 
 
 def _json_safe(x: Any) -> Any:
@@ -46,12 +61,18 @@ def write_sweep(
     out.mkdir(parents=True, exist_ok=True)
     plan = result.plan
     names = result.factor_names
-    (out / "sweep.csv").write_text(table_text(result.rows, plan.points, names), encoding="utf-8")
-    write_envelopes(out / "envelopes.npz", result.rows, plan.meta["envelope_dt_s"])
-    _, rows = read_table(out / "sweep.csv")  # the summary reads what was written
+    written: list[str] = []
+
+    def partial(name: str) -> Path:
+        written.append(name)
+        return out / (name + PARTIAL)
+
+    partial("sweep.csv").write_text(table_text(result.rows, plan.points, names), encoding="utf-8")
+    write_envelopes(partial("envelopes.npz"), result.rows, plan.meta["envelope_dt_s"])
+    _, rows = read_table(out / ("sweep.csv" + PARTIAL))  # the summary reads what was written
     summaries, rankings = summarise(rows, plan.factors, plan.experiments)
     md = render_summary(summaries, rankings, plan.meta["samples"], nominal)
-    (out / "summary.md").write_text(md, encoding="utf-8")
+    partial("summary.md").write_text(md, encoding="utf-8")
     doc = {
         **plan.meta,
         "executor": result.executor,
@@ -61,13 +82,13 @@ def write_sweep(
         "groups": [g.to_dict() for g in summaries],
         "rankings": [r.to_dict() for r in rankings],
     }
-    (out / "summary.json").write_text(
+    partial("summary.json").write_text(
         json.dumps(_json_safe(doc), indent=2, sort_keys=True) + "\n", encoding="utf-8"
     )
     if plots:
         from pneu_control.sweep.figures import plot_bands
 
-        env = np.load(out / "envelopes.npz")
+        env = np.load(out / ("envelopes.npz" + PARTIAL))
         for exp in plan.experiments:
             if any(r["experiment"] == exp.id for r in rows):
                 plot_bands(
@@ -76,6 +97,8 @@ def write_sweep(
                     env["envelope"],
                     float(env["envelope_dt_s"]),
                     summaries,
-                    out / f"{exp.id}__bands.png",
+                    partial(f"{exp.id}__bands.png"),
                 )
+    for name in written:  # complete: every file renamed (atomic each)
+        os.replace(out / (name + PARTIAL), out / name)
     return summaries, rankings, md

@@ -43,9 +43,12 @@ def excitation_spec(
 
 
 def run_excitation(
-    spec: RunSpec, out_dir: str | Path, *, progress: bool = True, hide_plant: bool = False
+    spec: RunSpec, out_dir: str | Path | Any, *, progress: bool = True, hide_plant: bool = False
 ) -> RunResult:
-    """Run ``spec`` and write ``run.mcap`` (+ metrics.json, timeseries.npz) into ``out_dir``.
+    """Run ``spec`` and write ``run.mcap`` (+ metrics.json, timeseries.npz) into ``out_dir``
+    (a path, or its claim :func:`pneu_control.experiment.session.run_dir`; the lifecycle of
+    :func:`~pneu_control.experiment.session.execute`: claimed, ``.partial`` names, a signal
+    finishes the files marked interrupted).
 
     ``hide_plant``: the bag's recorded config names no plant parameters (a
     blind identification study; the identifier reads no metadata but the

@@ -26,7 +26,14 @@ from pneu_control.sysid import model
 from pneu_control.sysid.fit import AxisFit, FitOptions, fit_axis
 from pneu_control.sysid.record import Record
 
-__all__ = ["Identification", "UNIDENTIFIABLE", "estimate_noise", "identify", "write_plant"]
+__all__ = [
+    "Identification",
+    "UNIDENTIFIABLE",
+    "estimate_noise",
+    "identify",
+    "output_claims",
+    "write_plant",
+]
 
 UNIDENTIFIABLE = 0.5  # 95 % half-width / value above which a value is not taken
 _QUIET_SIGNALS = {"linear": ("x", "p_c1", "p_c2"), "rotary": ("p_m1",)}
@@ -243,16 +250,39 @@ def _set(tree: dict, dotted: str, value: Any, source: str, ci95: float | None = 
     node.pop("alternatives", None)
 
 
-def write_plant(
-    ident: Identification, base_tree: dict, out: str | Path, *, force: bool = False
-) -> Path:
-    """Write the identified plant.yaml (validated before writing; never overwrites unless ``force``)."""
-    from pneu_msgs_py.params.core import flatten
-    from pneu_sim.physics.plant_file import params_from_tree, plant_tree_yaml
+def output_claims(
+    out: str | Path, *, overwrite: bool = False, inputs: Any = (), field: str = "--out"
+) -> tuple[Any, Any]:
+    """The claims on the identified plant.yaml and its report ``NAME.identify.json``
+    (:class:`pneu_msgs_py.lifecycle.outputs.OutputFile`), both checked: new files (or
+    ``overwrite``), neither one of ``inputs``."""
+    from pneu_msgs_py.lifecycle.outputs import OutputFile
 
     out = Path(out)
-    if out.exists() and not force:
-        raise FileExistsError(f"{out} exists; refusing to overwrite it (use --force)")
+    plant = OutputFile(
+        out, overwrite=overwrite, inputs=inputs, field=field, suffixes=(".yaml", ".yml")
+    )
+    report = OutputFile(
+        out.with_suffix(".identify.json"), overwrite=overwrite, inputs=inputs, field=field
+    )
+    return plant.check(), report.check()
+
+
+def write_plant(
+    ident: Identification,
+    base_tree: dict,
+    out: str | Path | tuple[Any, Any],
+    *,
+    overwrite: bool = False,
+) -> Path:
+    """Write the identified plant.yaml and its report (claims of :func:`output_claims`, or a
+    path: claimed here; never overwrites unless ``overwrite``). Both are written as
+    ``NAME.partial``, the YAML read back strictly, and renamed when both are complete."""
+    from pneu_msgs_py.params.core import flatten
+    from pneu_msgs_py.params.yaml_file import load_yaml
+    from pneu_sim.physics.plant_file import params_from_tree, plant_tree_yaml
+
+    claims = out if isinstance(out, tuple) else output_claims(out, overwrite=overwrite)
     names = ", ".join(
         Path(b).name if Path(b).name != "run.mcap" else str(Path(b).parent.name + "/run.mcap")
         for b in ident.bags
@@ -305,13 +335,20 @@ def write_plant(
         "# 95 % interval; everything else is the base file's. Pressures absolute, SI units.",
     ]
     text = plant_tree_yaml(tree, header)
-    import yaml
-
-    # the values load strictly, or nothing is written (checked on the leaves' value, unit and
-    # source: optional leaf keys, e.g. a range, are the base file's and kept as they are)
-    params_from_tree(_core_leaves(yaml.safe_load(text)))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text)
-    report = out.with_suffix(".identify.json")
-    report.write_text(json.dumps(ident.to_dict(), indent=2, sort_keys=True, default=float) + "\n")
-    return out
+    plant_claim, report_claim = claims
+    with plant_claim, report_claim:
+        try:
+            plant_claim.partial.write_text(text, encoding="utf-8")
+            # what was written loads strictly, or nothing is published (checked on the leaves'
+            # value, unit and source: optional leaf keys, e.g. a range, are the base file's)
+            params_from_tree(_core_leaves(load_yaml(plant_claim.partial)))
+            report_claim.partial.write_text(
+                json.dumps(ident.to_dict(), indent=2, sort_keys=True, default=float) + "\n",
+                encoding="utf-8",
+            )
+        except BaseException:
+            plant_claim.discard()
+            report_claim.discard()
+            raise
+        report_claim.publish()
+        return plant_claim.publish()

@@ -195,7 +195,7 @@ def plot_validation(v: BagValidation, out_png: str | Path) -> Path:
     fig.suptitle(f"{Path(v.bag).parent.name}/{Path(v.bag).name} ({v.mode}, {tag})", fontsize=10)
     fig.tight_layout()
     out_png = Path(out_png)
-    fig.savefig(out_png, dpi=90)
+    fig.savefig(out_png, dpi=90, format="png")
     plt.close(fig)
     return out_png
 
