@@ -15,7 +15,7 @@ import pytest
 import yaml
 from pneu_control.cli import paper as paper_cli
 from pneu_control.cli.main import main
-from pneu_control.cli.progress import counted, progress_bar
+from pneu_control.cli.progress import counted, progress_bar, progress_to
 from pneu_control.experiment import tuning
 from pneu_control.experiment.catalog import experiment_by_id
 
@@ -34,6 +34,27 @@ def test_bar_shows_count_rate_and_time_left_on_a_terminal():
     last = out.getvalue().split("\r")[-1]
     # e.g. "work: 100%|██████████| 3/3 [00:00<00:00, 3.1e+03run/s]"
     assert re.search(r"work: 100%.*3/3 \[\d\d:\d\d<\d\d:\d\d, .*run/s\]", last), last
+
+
+def test_progress_callback_moves_the_bar_to_done_and_takes_a_new_total():
+    out = Tty()
+    bar = progress_bar(1, "sweep", unit="run", file=out)
+    report = progress_to(bar, "sweep")
+    for done in (1, 3, 4):  # runs finish in batches; the total is learnt from the first call
+        report(done, 4)
+    assert (bar.n, bar.total) == (4, 4)
+    bar.close()
+    assert "4/4" in out.getvalue().split("\r")[-1]
+
+
+def test_progress_callback_off_a_terminal_prints_a_line_at_the_end(capsys):
+    bar = progress_bar(5, "sweep", unit="run", file=io.StringIO())
+    report = progress_to(bar, "sweep", every_s=1e9)
+    for done in range(1, 6):
+        report(done, 5)
+    bar.close()
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and re.fullmatch(r"  sweep: 5/5 runs, \d+ s", lines[0]), lines
 
 
 def test_bar_is_silent_off_a_terminal():

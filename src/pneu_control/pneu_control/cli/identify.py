@@ -10,6 +10,8 @@ from pathlib import Path
 from pneu_msgs_py.lifecycle import signals
 from pneu_msgs_py.params.core import ParamError
 
+from pneu_control.cli.progress import progress_bar, progress_to
+
 NAME = "identify"
 HELP = (
     "output-error fit of the twin to bags (valve flow curve, leakage, friction, motor inertia, "
@@ -82,13 +84,20 @@ def run(args: argparse.Namespace) -> int:
         if args.axis is None
         else (("linear", "rotary") if args.axis == "both" else (args.axis,))
     )
-    ident = identify(
-        records,
-        base,
-        axes=axes,
-        options=FitOptions(max_nfev=args.max_steps),
-        log=lambda m: print(m, file=sys.stderr),
-    )
+    bar = progress_bar(1, "pneu identify", unit="stage")  # total set by identify's first call
+    try:
+        ident = identify(
+            records,
+            base,
+            axes=axes,
+            options=FitOptions(max_nfev=args.max_steps),
+            log=lambda m: bar.write(m, file=sys.stderr),
+            progress=progress_to(
+                bar, "identify", unit="stage", every_s=1e9
+            ),  # the stage lines say it
+        )
+    finally:
+        bar.close()
     with signals.deferred():  # both files finished (or neither), whatever signal comes
         path = write_plant(ident, base_tree, out_claims)
     print(ident.report())

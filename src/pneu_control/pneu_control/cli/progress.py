@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import functools
 import sys
+import time
 from collections.abc import Callable
 from typing import Any, TextIO, TypeVar
 
 from tqdm import tqdm
 
-__all__ = ["Bar", "counted", "progress_bar"]
+__all__ = ["Bar", "counted", "progress_bar", "progress_to"]
 
 Bar = tqdm
 F = TypeVar("F", bound=Callable[..., Any])
@@ -53,3 +54,24 @@ def counted(fn: F, bar: Bar) -> F:
         return out
 
     return step  # type: ignore[return-value]
+
+
+def progress_to(
+    bar: Bar, label: str, *, unit: str = "run", every_s: float = 10.0
+) -> Callable[[int, int], None]:
+    """A ``progress(done, total)`` callback (sweeps, identification stages) that moves ``bar``
+    to ``done``; off a terminal (no bar drawn) one line ``label: done/total, N s`` at most
+    every ``every_s`` seconds and at the end, so a log still shows the work advancing."""
+    start = time.monotonic()
+    last = [start]
+
+    def report(done: int, total: int) -> None:
+        if bar.total != total:
+            bar.total = total
+        bar.update(done - bar.n)
+        now = time.monotonic()
+        if bar.disable and (done == total or now - last[0] >= every_s):
+            last[0] = now
+            print(f"  {label}: {done}/{total} {unit}s, {now - start:.0f} s", file=sys.stderr)
+
+    return report

@@ -12,6 +12,7 @@ from pneu_msgs_py.lifecycle.duration import check_duration
 from pneu_msgs_py.lifecycle.outputs import OutputDir
 from pneu_msgs_py.params.core import ParamError
 
+from pneu_control.cli.progress import progress_bar, progress_to
 from pneu_control.experiment import session
 from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, experiment_by_id
 
@@ -118,19 +119,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_executor_arguments(p)
 
 
-def progress_printer(label: str):
-    start = time.monotonic()
-    last = [start]
-
-    def report(done: int, total: int) -> None:
-        now = time.monotonic()
-        if done == total or now - last[0] >= 10.0:
-            last[0] = now
-            print(f"  {label}: {done}/{total} runs, {now - start:.0f} s", file=sys.stderr)
-
-    return report
-
-
 def check_executor_args(args: argparse.Namespace) -> None:
     if args.address is not None and args.executor != "dask":
         raise ParamError("--address", args.address, "with --executor dask")
@@ -191,6 +179,7 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     with claim:
+        bar = progress_bar(len(plan.tasks), "pneu sweep", unit="run")
         try:
             # a signal here raises at once: the executor stops its workers, nothing is written
             result = run_sweep(
@@ -198,11 +187,13 @@ def run(args: argparse.Namespace) -> int:
                 executor=args.executor,
                 workers=args.workers,
                 address=args.address,
-                progress=progress_printer("sweep"),
+                progress=progress_to(bar, "sweep"),
             )
         except BaseException:
             claim.discard()
             raise
+        finally:
+            bar.close()
         with signals.deferred():  # every file finished; a signal now ends the command after
             _, _, md = write_sweep(result, claim.path, plots=not args.no_plots)
     print(md)

@@ -111,14 +111,20 @@ def _autocorr_time(r: np.ndarray, max_lag: int = 200) -> float:
     return tau
 
 
+STAGES = 4  # flow curve, every parameter, and each once again (fit_axis)
+
+
 def fit_axis(
     axis: str,
     base,
     records: list[Record],
     options: FitOptions | None = None,
     log: Callable[[str], None] = print,
+    stage: Callable[[], None] = lambda: None,
 ) -> AxisFit:
     """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``.
+
+    ``stage()`` is called as each of the (at most :data:`STAGES`) stages below begins.
 
     Stage 1: the valve's flow curve (scale and dead band: what sets the
     operating points, and what a start far off gets most wrong) by
@@ -126,6 +132,7 @@ def fit_axis(
     there -- otherwise the friction, supply and exhaust parameters absorb a
     wrong flow curve (a local minimum). When stage 2 moves the dead band away
     from the scan's pick, the scan runs again with the other parameters as
+    fitted (stage()
     fitted (stage 2 again if it finds a lower cost elsewhere).
     """
     options = options or FitOptions()
@@ -134,8 +141,10 @@ def fit_axis(
     full = _Problem(axis, base, records, replace(options, params=names))
     if not {f"{'valve_' + axis}.Q_n", f"valve_{axis}.{model.DEAD_BAND}"} <= set(first):
         return full.solve(None, log)
+    stage()
     log(f"  {axis}: stage 1, the valve's flow curve ({', '.join(first)})")
     start, _ = _flow_curve_start(axis, base, records, options, first, {}, log)
+    stage()
     log(f"  {axis}: stage 2, every parameter")
     fit = full.solve(start, log)
     # The scan saw the other parameters at their start values; when stage 2 moved the dead
@@ -149,6 +158,7 @@ def fit_axis(
     fitted = dict(zip(fit.names, fit.value))
     base2 = model.apply(base, tuple(others), [fitted[p.name] for p in others])
     offs = {f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()}
+    stage()
     log(f"  {axis}: stage 1 again, the other parameters as fitted")
     start2, cost2 = _flow_curve_start(axis, base2, records, options, first, offs, log)
     if cost2 >= fit.cost or abs(start2[db] - d_fit) <= 0.005:

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from pneu_control.sysid import model
-from pneu_control.sysid.fit import AxisFit, FitOptions, fit_axis
+from pneu_control.sysid.fit import STAGES, AxisFit, FitOptions, fit_axis
 from pneu_control.sysid.record import Record
 
 __all__ = [
@@ -171,8 +171,11 @@ def identify(
     axes: tuple[str, ...] | None = None,
     options: FitOptions | None = None,
     log: Callable[[str], None] = print,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Identification:
-    """Identify ``base`` (PlantParams) from ``records``; see the module docstring."""
+    """Identify ``base`` (PlantParams) from ``records``; see the module docstring.
+
+    ``progress(done, total)``: fit stages begun of at most ``STAGES`` per axis."""
     options = options or FitOptions()
     axes = axes or tuple(a for a in ("linear", "rotary") if _excited(records, a))
     if not axes:
@@ -182,12 +185,22 @@ def identify(
     plant = base
     fits: dict[str, AxisFit] = {}
     kept: list[str] = []
-    for axis in ("linear", "rotary"):
-        if axis not in axes:
-            continue
+    total = STAGES * len(axes)
+    done = [0]
+
+    def stage() -> None:
+        done[0] += 1
+        if progress is not None:
+            progress(done[0], total)
+
+    for i, axis in enumerate(a for a in ("linear", "rotary") if a in axes):
         recs = _excited(records, axis)
         log(f"{axis}: fitting {len(model.AXIS_PARAMS[axis])} parameters to {len(recs)} bag(s)")
-        fit = fit_axis(axis, plant, recs, options, log=log)
+        done[0] = STAGES * i
+        fit = fit_axis(axis, plant, recs, options, log=log, stage=stage)
+        done[0] = STAGES * (i + 1)
+        if progress is not None:
+            progress(done[0], total)
         fits[axis] = fit
         params = [p for p in model.AXIS_PARAMS[axis] if p.name in fit.names]
         take = []
