@@ -97,9 +97,13 @@ def _turnaround_us(data, axis: str) -> np.ndarray:
     s = data[sample_topic]
     c = data[f"/pneu/{axis}/valve_command"]
     pub = dict(zip(s.stamp_ns.tolist(), s.publish_time_ns.tolist()))
-    ta = [
-        cp - pub[st] for st, cp in zip(c.stamp_ns.tolist(), c.publish_time_ns.tolist()) if st in pub
-    ]
+    # the answer to a sample is the first command with its stamp (at shutdown a controller
+    # sends 5 V stamped with the last sample again: not an answer)
+    first: dict[int, int] = {}
+    for st, cp in zip(c.stamp_ns.tolist(), c.publish_time_ns.tolist()):
+        if st in pub and (st not in first or cp < first[st]):
+            first[st] = cp
+    ta = [cp - pub[st] for st, cp in first.items()]
     return np.asarray(ta, dtype=np.int64) * 1e-3
 
 
