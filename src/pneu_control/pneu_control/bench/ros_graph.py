@@ -11,6 +11,9 @@ chosen deployment and executor, samples each process's CPU time from
 - ``turnaround.<axis>`` p50 / p99 / max: from a sample's publication to the
   publication of the command answering it, both from the bag's
   ``publish_time`` (the publishers' source timestamps, one clock);
+- ``safety_trips.<axis>`` and ``first_trip_s.<axis>``: the supervisor's ERROR transitions
+  (e.g. its 5 ms command watchdog): a trip holds the valve at 5 V until acknowledged, so
+  a run with one is not a run at 1 kHz whatever the missed count says;
 - ``cpu.<process>``: CPU time / wall time while the run was in its steady part.
 
 Needs ROS 2 and this workspace sourced. Prints a table, or JSON with ``--json``.
@@ -107,6 +110,20 @@ def _turnaround_us(data, axis: str) -> np.ndarray:
     return np.asarray(ta, dtype=np.int64) * 1e-3
 
 
+def _safety_trips(data, axis: str) -> tuple[int, float | None]:
+    """(ERROR transitions of ``axis``'s supervisor rules, the first one's time in s from the
+    first sample or None): a trip latches the valve at 5 V until acknowledged."""
+    t0 = int(data["/pneu/linear/joint_state"].stamp_ns[0])
+    name = f"pneu_sim: safety {axis} "  # "... <rule>"; the 1 Hz axis summary has no rule
+    trips = []
+    for stamp, statuses in zip(
+        data["/diagnostics"].stamp_ns.tolist(), data["/diagnostics"].objects
+    ):
+        trips += [stamp for st in statuses if st.level >= 2 and st.name.startswith(name)]
+    first = (min(trips) - t0) * 1e-9 if trips else None
+    return len(trips), first
+
+
 def _sim_counters(data) -> dict[str, str]:
     """The sim's last ``pneu_sim: lockstep`` diagnostics values (its loop counters)."""
     last: dict[str, str] = {}
@@ -167,6 +184,7 @@ def measure(duration_s: float, deployment: str, executor: str, out: Path) -> dic
         for q in (50, 99):
             res[f"turnaround_p{q}_us.{axis}"] = float(np.percentile(ta, q)) if ta.size else None
         res[f"turnaround_max_us.{axis}"] = float(ta.max()) if ta.size else None
+        res[f"safety_trips.{axis}"], res[f"first_trip_s.{axis}"] = _safety_trips(data, axis)
     for name in sorted(set(c0) | set(c1)):
         res[f"cpu_pct.{name}"] = 100.0 * (c1.get(name, 0) - c0.get(name, 0)) / _CLK / (t1 - t0)
     return res

@@ -24,6 +24,7 @@ rclpy is imported inside the functions: this module imports without ROS.
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import sys
@@ -141,6 +142,11 @@ def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | No
         node.get_logger().info(f"executor: {used}")
         for n in nodes:
             executor.add_node(n)
+        # what start-up made (rclpy, numpy, the cores: ~1e5 objects) leaves the cyclic
+        # collector, so a full collection at a random callback does not walk it all
+        # (milliseconds; the realtime loops do the same: pneu_driver.loop.rt)
+        gc.collect()
+        gc.freeze()
         for n in nodes:
             n.start()
         # Spin in slices: Python gets control back every SPIN_SLICE_S, so Ctrl-C and SIGTERM
