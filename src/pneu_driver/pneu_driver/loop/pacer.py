@@ -32,19 +32,33 @@ class Timing:
         if ns > self.max_ns:
             self.max_ns = ns
 
-    def values(self) -> np.ndarray:
+    def values(self, last: int | None = None) -> np.ndarray:
+        """The recorded durations (the whole ring, or the ``last`` ones), in no particular order."""
         n, w = self.n, self._ring.shape[0]
-        return self._ring[: min(n, w)].copy()
+        if last is None or last >= min(n, w):
+            return self._ring[: min(n, w)].copy()
+        i = n % w  # the next slot: the newest ``last`` end just before it
+        return np.concatenate(
+            (self._ring[max(0, i - last) : i], self._ring[w - max(0, last - i) :])
+        )
 
-    def percentile_us(self, q: float) -> float:
-        v = self.values()
+    def percentile_us(self, q: float, last: int | None = None) -> float:
+        v = self.values(last)
         return float(np.percentile(v, q)) * 1e-3 if v.size else float("nan")
 
-    def summary(self, prefix: str) -> dict[str, str]:
-        """``{prefix_p50_us, prefix_p99_us, prefix_max_us, prefix_n}`` as strings (diagnostics)."""
+    def summary(self, prefix: str, last: int | None = None) -> dict[str, str]:
+        """``{prefix_p50_us, prefix_p99_us, prefix_max_us, prefix_n}`` as strings (diagnostics).
+
+        Percentiles over the ``last`` ticks (None: the whole ring). Over a full ring of 60,000
+        they cost ~1.7 ms per Timing (measured): a 1 Hz diagnostics callback on the executor
+        thread that took 5 ms held up the commands behind it long enough for the supervisor's
+        5 ms command watchdog, so periodic reports use the last second.
+        """
+        v = self.values(last)
+        p50, p99 = (np.percentile(v, (50, 99)) * 1e-3) if v.size else (float("nan"),) * 2
         return {
-            f"{prefix}_p50_us": f"{self.percentile_us(50):.1f}",
-            f"{prefix}_p99_us": f"{self.percentile_us(99):.1f}",
+            f"{prefix}_p50_us": f"{p50:.1f}",
+            f"{prefix}_p99_us": f"{p99:.1f}",
             f"{prefix}_max_us": f"{self.max_ns * 1e-3:.1f}",
             f"{prefix}_n": str(self.n),
         }

@@ -56,9 +56,10 @@ class LoopStats:
         """The most recent per-cycle costs (up to the window), oldest first."""
         return self._window(self._cost, self._n_cost)
 
-    def cost_us(self, q: float = 50.0) -> float:
-        """The q-th percentile of the per-cycle cost over the window [µs]."""
+    def cost_us(self, q: float = 50.0, last: int | None = None) -> float:
+        """The q-th percentile of the per-cycle cost over the window (or the ``last`` cycles) [µs]."""
         c = self.cost_ns()
+        c = c[-last:] if last else c
         return float(np.percentile(c, q)) * 1e-3 if c.size else math.nan
 
     def record(self, lateness_ns: int, late: bool = False) -> None:
@@ -100,14 +101,18 @@ class LoopStats:
         total = self.cycles + self.missed_ticks
         return self.on_time / total if total else math.nan
 
-    def jitter_us(self, q: float = 99.0) -> float:
-        """The q-th percentile of |lateness| over the window [µs]."""
+    def jitter_us(self, q: float = 99.0, last: int | None = None) -> float:
+        """The q-th percentile of |lateness| over the window (or the ``last`` cycles) [µs]."""
         lat = self.lateness_ns()
+        lat = lat[-last:] if last else lat
         if lat.size == 0:
             return math.nan
         return float(np.percentile(np.abs(lat), q)) * 1e-3
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self, last: int | None = None) -> dict[str, Any]:
+        """Counters, and percentiles over the window or the ``last`` cycles (a 1 Hz report takes
+        the last second: over a full 60,000-cycle window they cost milliseconds on the thread
+        that also takes the commands, see :meth:`pneu_driver.loop.pacer.Timing.summary`)."""
         return {
             "cycles": self.cycles,
             "on_time": self.on_time,
@@ -116,9 +121,9 @@ class LoopStats:
             "daq_late_errors": self.daq_late_errors,
             "daq_late_codes": " ".join(f"{c}:{n}" for c, n in sorted(self.late_codes.items())),
             "on_time_ratio": self.on_time_ratio,
-            "jitter_us_p99": self.jitter_us(99.0),
+            "jitter_us_p99": self.jitter_us(99.0, last),
             "max_lateness_us": self.max_lateness_ns * 1e-3,
-            "cost_us_p50": self.cost_us(50.0),
-            "cost_us_p99": self.cost_us(99.0),
+            "cost_us_p50": self.cost_us(50.0, last),
+            "cost_us_p99": self.cost_us(99.0, last),
             "heartbeats": self.heartbeats,
         }

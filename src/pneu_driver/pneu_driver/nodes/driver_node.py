@@ -238,7 +238,8 @@ class DriverNode(ShellDefaults, Node):
     def _diagnostics(self) -> None:
         stats = {
             k: f"{v:.6g}" if isinstance(v, float) else str(v)
-            for k, v in self.loop.stats.as_dict().items()
+            # percentiles over the last second: cheap on the executor thread taking the commands
+            for k, v in self.loop.stats.as_dict(last=round(self.loop.rig.loop.rate_hz)).items()
         }
         err = self.loop.error
         running = self.thread is not None and self.thread.is_alive()

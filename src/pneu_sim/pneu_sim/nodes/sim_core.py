@@ -327,12 +327,13 @@ class SimLoop:
         th.start()
         return th
 
-    def stats(self) -> dict[str, str]:
-        """Timing and counters for ``/diagnostics`` and the end-of-run report."""
+    def stats(self, last: int | None = None) -> dict[str, str]:
+        """Timing and counters for ``/diagnostics`` (percentiles over the ``last`` ticks) and the
+        end-of-run report (``last`` None: the whole ring)."""
         out = {k: str(v) for k, v in self.cycle.counters().items()}
-        out.update(self.pacer.lateness.summary("lateness"))
+        out.update(self.pacer.lateness.summary("lateness", last))
         out["skipped_ticks"] = str(self.pacer.skipped)
         for axis, t in self.turnaround.items():
-            out.update(t.summary(f"turnaround.{axis}"))
+            out.update(t.summary(f"turnaround.{axis}", last))
         out["realtime"] = "; ".join(self.notes) or "normal scheduling"
         return out

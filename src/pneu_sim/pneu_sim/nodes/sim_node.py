@@ -136,7 +136,7 @@ class SimNode(ShellDefaults, Node):
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+        self.create_timer(1.0, lambda: self._publish_diagnostics(periodic=True), clock=steady)
         self.loop: SimLoop | None = None
         if not self.lockstep:
             self.loop = SimLoop(
@@ -342,12 +342,17 @@ class SimNode(ShellDefaults, Node):
                 )
             )
 
-    def _publish_diagnostics(self) -> None:
+    def _publish_diagnostics(self, periodic: bool = False) -> None:
+        """The 1 Hz status (``periodic``: timing percentiles over the last second, cheap on the
+        executor thread that also takes the commands) or the final one (the whole run)."""
         c = self.core.counters()
         lost = sum(v for k, v in c.items() if not k.startswith("steps"))
         elapsed = max(time.monotonic() - self.t_start, 1e-9)
         sim_s = (self.core.sample.stamp_ns * 1e-9) if self.core.sample is not None else 0.0
-        values = self.loop.stats() if self.loop is not None else {k: str(v) for k, v in c.items()}
+        last = round(1.0 / self.core.period_s) if periodic else None
+        values = (
+            self.loop.stats(last) if self.loop is not None else {k: str(v) for k, v in c.items()}
+        )
         values.update(
             mode=self.p.mode, sim_time_s=f"{sim_s:.3f}", real_time_factor=f"{sim_s / elapsed:.3g}"
         )
