@@ -10,6 +10,7 @@ import time
 from pneu_msgs_py.lifecycle import exits, signals
 from pneu_msgs_py.params.yaml_file import from_option
 
+from pneu_control.cli.run import add_run_dir_arguments
 from pneu_control.experiment import session
 
 NAME = "excite"
@@ -21,18 +22,7 @@ HELP = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axis", choices=("linear", "rotary", "both"), default="both")
-    p.add_argument(
-        "--out",
-        required=True,
-        metavar="DIR",
-        help="run directory: new or empty (or --overwrite); gets run.mcap, metrics.json, "
-        "timeseries.npz",
-    )
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace the pneu outputs of a previous run in DIR (other files are left alone)",
-    )
+    add_run_dir_arguments(p)
     p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
     p.add_argument(
         "--seed", type=int, default=0, help="design and noise seed, an integer in [0, 2^32 - 1]"

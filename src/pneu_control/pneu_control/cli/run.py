@@ -15,6 +15,22 @@ NAME = "run"
 HELP = "run one closed-loop experiment on the twin (in-process lockstep) and write metrics"
 
 
+def add_run_dir_arguments(p: argparse.ArgumentParser) -> None:
+    """``--out DIR`` and ``--overwrite`` of a command that writes one run (run, excite)."""
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="run directory: new or empty (or --overwrite); gets run.mcap, metrics.json, "
+        "timeseries.npz",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the pneu outputs of a previous run in DIR (other files are left alone)",
+    )
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axis", choices=("linear", "rotary", "both"), default="linear")
     p.add_argument(
@@ -37,18 +53,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="simulated seconds, [0.01, 600] (the duration cap of every command)",
     )
     p.add_argument("--seed", type=int, default=0, help="noise seed, an integer in [0, 2^32 - 1]")
-    p.add_argument(
-        "--out",
-        required=True,
-        metavar="DIR",
-        help="run directory: new or empty (or --overwrite); gets run.mcap, metrics.json, "
-        "timeseries.npz",
-    )
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace the pneu outputs of a previous run in DIR (other files are left alone)",
-    )
+    add_run_dir_arguments(p)
     p.add_argument(
         "--set",
         action="append",
