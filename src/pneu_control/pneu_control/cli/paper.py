@@ -15,7 +15,7 @@ from pneu_msgs_py.params.paths import config_dir
 from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.analysis.plots import Series, plot_runs
-from pneu_control.cli.progress import counted, progress_bar, progress_to
+from pneu_control.cli.progress import counted, progress_bar
 from pneu_control.controller.params import load_controller_params
 from pneu_control.experiment import paper, session
 from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, Experiment, experiment_by_id
@@ -230,7 +230,8 @@ def _run(args, claim: OutputDir, plant, cfg: Path, experiments) -> int:
 def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
     """The rows over ``--uncertainty`` plant samples: out/uncertainty/, and the band
     table appended to paper_table.md/json beside the nominal figures."""
-    from pneu_control.sweep.engine import plan_sweep, run_sweep
+    from pneu_control.cli.sweep import run_plan
+    from pneu_control.sweep.engine import plan_sweep
 
     plan = plan_sweep(
         samples=args.uncertainty,
@@ -245,17 +246,7 @@ def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
         f"({len(plan.factors)} factors) on {args.executor}",
         file=sys.stderr,
     )
-    bar = progress_bar(len(plan.tasks), "pneu paper --uncertainty", unit="run")
-    try:
-        result = run_sweep(
-            plan,
-            executor=args.executor,
-            workers=args.workers,
-            address=args.address,
-            progress=progress_to(bar, "uncertainty"),
-        )
-    finally:
-        bar.close()
+    result = run_plan(plan, args, "pneu paper --uncertainty", "uncertainty")
     nominal = {(r.id, r.controller, r.gains): (r.e_max, r.rmse) for r in rows}
     with signals.deferred():
         return _write_uncertainty(args, result, out, nominal, len(plan.tasks))

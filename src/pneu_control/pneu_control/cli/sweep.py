@@ -119,6 +119,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_executor_arguments(p)
 
 
+def run_plan(plan, args: argparse.Namespace, desc: str, label: str):
+    """``run_sweep(plan)`` on the executor the options name (``add_executor_arguments``), with
+    a progress bar (``desc``; off a terminal, lines starting ``label``)."""
+    from pneu_control.sweep.engine import run_sweep
+
+    bar = progress_bar(len(plan.tasks), desc, unit="run")
+    try:
+        return run_sweep(
+            plan,
+            executor=args.executor,
+            workers=args.workers,
+            address=args.address,
+            progress=progress_to(bar, label),
+        )
+    finally:
+        bar.close()
+
+
 def check_executor_args(args: argparse.Namespace) -> None:
     if args.address is not None and args.executor != "dask":
         raise ParamError("--address", args.address, "with --executor dask")
@@ -127,7 +145,7 @@ def check_executor_args(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pneu_control.sweep.engine import custom_experiment, plan_sweep, run_sweep
+    from pneu_control.sweep.engine import custom_experiment, plan_sweep
     from pneu_control.sweep.report import sweep_artefacts, write_sweep
 
     # everything checked before anything is written: options, the output, every file
@@ -179,21 +197,12 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     with claim:
-        bar = progress_bar(len(plan.tasks), "pneu sweep", unit="run")
         try:
             # a signal here raises at once: the executor stops its workers, nothing is written
-            result = run_sweep(
-                plan,
-                executor=args.executor,
-                workers=args.workers,
-                address=args.address,
-                progress=progress_to(bar, "sweep"),
-            )
+            result = run_plan(plan, args, "pneu sweep", "sweep")
         except BaseException:
             claim.discard()
             raise
-        finally:
-            bar.close()
         with signals.deferred():  # every file finished; a signal now ends the command after
             _, _, md = write_sweep(result, claim.path, plots=not args.no_plots)
     print(md)
