@@ -22,6 +22,8 @@ Per sample the controller calls exactly one of
   valve command never jumps.
 - ``update(inp) -> u`` -- every later sample.
 
+``KernelAlgorithm`` is the documented way to write one (docs/design.md §11): its
+steps are kernels on records, run here and in the compiled loop alike.
 Both return the saturated deviation and leave readable attributes:
 ``z1, z2, z3`` (observer states, NaN if none), ``s`` (sliding variable, NaN
 if none), ``u_raw`` (unsaturated deviation) and ``hint`` (its estimates
@@ -33,38 +35,66 @@ algorithm that reads it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, NamedTuple, Protocol
 
-__all__ = ["Algorithm", "NAN", "StepInput"]
+from pneu_msgs_py.params.records import Record, RecordType
+
+__all__ = [
+    "Algorithm",
+    "AlgorithmKernel",
+    "KernelAlgorithm",
+    "MAX_HISTORY",
+    "NAN",
+    "NO_TABLE",
+    "STEP_INPUT",
+    "StepInput",
+]
 
 NAN = float("nan")
+MAX_HISTORY = 6  # transport_delay_samples <= 5 (AxisControllerParams): d + 1 commands
+
+# One sample's input to an algorithm (paper units), a kernel record (docs/design.md §11),
+# filled in place by the controller. ``y``, ``r``, ``r_dot``, ``r_ddot``: measurement and
+# reference with its derivatives (mm or rpm; with ``rotary_model: angle`` and a TD
+# algorithm, the angle θ and θ_r in rpm·s). ``u_applied``: the saturated deviation on the
+# valve during the last sample period (V; the ESO predicts with it). ``history[:n_hist]``:
+# the commands in V, oldest first -- the one on the valve during the last period, then
+# the ``transport_delay_samples`` commands already sent but not yet applied (the
+# controller's: read only). ``theta``: encoder angle in rpm·s (``uses_theta``).
+# ``p_c1``, ``p_c2``: chamber pressures in Pa absolute (``uses_pressures``).
+STEP_INPUT = RecordType(
+    "StepInput",
+    [
+        ("y", "f", 0.0),
+        ("r", "f", 0.0),
+        ("r_dot", "f", 0.0),
+        ("r_ddot", "f", 0.0),
+        ("u_applied", "f", 0.0),
+        ("theta", "f"),
+        ("p_c1", "f"),
+        ("p_c2", "f"),
+        ("n_hist", "i", 1),
+        ("history", ("f", MAX_HISTORY)),
+    ],
+)
+StepInput = STEP_INPUT.cls
+
+# the table argument of an algorithm without one (a kernel's signature is the same for all)
+NO_TABLE: list[list[float]] = [[0.0]]
 
 
-@dataclass(slots=True)
-class StepInput:
-    """One sample's input to an algorithm (paper units). Filled in place by the controller.
+class AlgorithmKernel(NamedTuple):
+    """An algorithm's three kernels (:func:`pneu_msgs_py.params.records.kernel` functions).
 
-    ``y``, ``r``, ``r_dot``, ``r_ddot``: measurement and reference with its
-    derivatives (mm or rpm; with ``rotary_model: angle`` and a TD algorithm,
-    the angle θ and θ_r in rpm·s). ``u_applied``: the saturated deviation on
-    the valve during the last sample period (V; the ESO predicts with it).
-    ``history``: the commands in V, oldest first -- the one on the valve
-    during the last period, then the ``transport_delay_samples`` commands
-    already sent but not yet applied (the controller's own list: read only).
-    ``theta``: encoder angle in rpm·s (``uses_theta``). ``p_c1``, ``p_c2``:
-    chamber pressures in Pa absolute (``uses_pressures``).
+    ``start(c, s, table, inp, u_prev, h0, h1, h2) -> u``: ``u_prev`` NaN on a cold start;
+    ``update(c, s, table, inp) -> u``; ``hint(c, s) -> (y, ẏ, ÿ)``. ``c``: the constants
+    record, ``s``: the state record, ``table``: a float64[rows, n] table (or
+    :data:`NO_TABLE`), ``inp``: a :data:`STEP_INPUT` record.
     """
 
-    y: float = 0.0
-    r: float = 0.0
-    r_dot: float = 0.0
-    r_ddot: float = 0.0
-    u_applied: float = 0.0
-    history: list[float] = field(default_factory=list)
-    theta: float = NAN
-    p_c1: float = NAN
-    p_c2: float = NAN
+    start: Any
+    update: Any
+    hint: Any
 
 
 class Algorithm(Protocol):
@@ -81,8 +111,82 @@ class Algorithm(Protocol):
     @property
     def hint(self) -> tuple[float, float, float]: ...
 
-    def start(
-        self, inp: StepInput, u_prev: float | None, hint: tuple[float, float, float]
-    ) -> float: ...
+    def start(self, inp: Any, u_prev: float | None, hint: tuple[float, float, float]) -> float: ...
 
-    def update(self, inp: StepInput) -> float: ...
+    def update(self, inp: Any) -> float: ...
+
+
+class KernelAlgorithm:
+    """An :class:`Algorithm` whose steps are kernels on records (the documented way, §11).
+
+    A subclass declares ``name``, the flags, ``CONSTANTS`` and ``STATE`` (
+    :class:`~pneu_msgs_py.params.records.RecordType`; ``STATE`` has at least ``z1, z2,
+    z3, s, u_raw``), ``KERNEL`` (an :class:`AlgorithmKernel`) and ``constants(params,
+    axis)`` returning the filled constants record; optionally ``table(params, axis)`` and
+    ``initial_state(c)``. The same kernels run here (Python) and inside the compiled
+    loop (:mod:`pneu_control.fastloop`), which finds the algorithm by ``name`` there.
+    Other attributes read through (state, then constants): ``alg.integral``, ``alg.kp``.
+    """
+
+    name: str = ""
+    uses_td = False
+    uses_theta = False
+    uses_pressures = False
+    CONSTANTS: RecordType
+    STATE: RecordType
+    KERNEL: AlgorithmKernel
+
+    def __init__(self, params: Any, axis: str):
+        self.c = self.constants(params, axis)
+        self.st = self.initial_state(self.c)
+        self.tab = self.table(params, axis)
+
+    # -- what a subclass provides ---------------------------------------------
+    def constants(self, params: Any, axis: str) -> Record:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def initial_state(self, c: Record) -> Record:
+        """The fresh state (the record's defaults: NaN floats, zero codes)."""
+        return self.STATE.new()
+
+    def table(self, params: Any, axis: str) -> Any:
+        return NO_TABLE
+
+    # -- the Algorithm interface ----------------------------------------------
+    def start(self, inp: Any, u_prev: float | None, hint: tuple[float, float, float]) -> float:
+        u = NAN if u_prev is None else u_prev
+        return self.KERNEL.start(self.c, self.st, self.tab, inp, u, hint[0], hint[1], hint[2])
+
+    def update(self, inp: Any) -> float:
+        return self.KERNEL.update(self.c, self.st, self.tab, inp)
+
+    @property
+    def hint(self) -> tuple[float, float, float]:
+        return self.KERNEL.hint(self.c, self.st)
+
+    @property
+    def z1(self) -> float:
+        return self.st.z1
+
+    @property
+    def z2(self) -> float:
+        return self.st.z2
+
+    @property
+    def z3(self) -> float:
+        return self.st.z3
+
+    @property
+    def s(self) -> float:
+        return self.st.s
+
+    @property
+    def u_raw(self) -> float:
+        return self.st.u_raw
+
+    def __getattr__(self, name: str) -> Any:  # only for names not found normally
+        for rec in ("st", "c"):
+            r = self.__dict__.get(rec)
+            if r is not None and name in r.TYPE.names:
+                return getattr(r, name)
+        raise AttributeError(f"{type(self).__name__} has no attribute {name!r}")

@@ -61,8 +61,9 @@ from typing import TYPE_CHECKING
 
 from pneu_msgs_py.contract.units import RPM_PER_RAD_S
 from pneu_msgs_py.params.core import param
+from pneu_msgs_py.params.records import RecordType, kernel
 
-from pneu_control.algorithms.base import StepInput
+from pneu_control.algorithms.base import AlgorithmKernel, KernelAlgorithm
 from pneu_control.algorithms.smc import (
     NONNEGATIVE,
     POSITIVE,
@@ -81,7 +82,15 @@ from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predic
 if TYPE_CHECKING:
     from pneu_control.controller.params import AxisControllerParams
 
-__all__ = ["EsoSmc", "EsoSmcParams", "friction_gain_max"]
+__all__ = [
+    "ESO_SMC_CONSTANTS",
+    "ESO_SMC_STATE",
+    "EsoSmc",
+    "EsoSmcParams",
+    "eso_smc_start",
+    "eso_smc_update",
+    "friction_gain_max",
+]
 
 
 @dataclass(frozen=True)
@@ -145,118 +154,155 @@ def friction_gain_max(M_c: float, M_v: float, J_m: float, omega_s: float) -> flo
     return RPM_PER_RAD_S / J_m * (M_v + M_c / omega_s)
 
 
-class EsoSmc:
+ESO_SMC_CONSTANTS = RecordType(
+    "EsoSmcConstants",
+    [
+        ("T", "f"), ("T2h", "f"), ("c1", "f"), ("c2", "f"), ("b0", "f"), ("eps", "f"),
+        ("delta", "f"), ("k", "f"), ("l1", "f"), ("l2", "f"), ("l3", "f"), ("fs", "f"),
+        ("M_c", "f"), ("M_v", "f"), ("fv", "f"), ("fc", "f"), ("inv_ws", "f"), ("lo", "f"),
+        ("hi", "f"), ("tau", "f"), ("u_n", "f"),
+        ("two", "f", 2.0),  # the exponent of cosh(x) ** 2, a field: see friction_term
+        ("aw", "i"), ("dc", "i"), ("fric", "i"), ("angle", "i"),
+    ],
+)  # fmt: skip
+ESO_SMC_STATE = RecordType(
+    "EsoSmcState",
+    [("z1", "f", 0.0), ("z2", "f", 0.0), ("z3", "f", 0.0), ("s", "f", 0.0),
+     ("u_raw", "f", 0.0), ("integral", "f", 0.0), ("f_k", "f", 0.0), ("u_in", "f", 0.0)],
+)  # fmt: skip
+
+
+@kernel
+def friction_term(c, z1, z2):
+    """f_k (rpm/s²) of the rotary friction model; 0 when off."""
+    if not c.fric:
+        return 0.0
+    if c.angle:  # Eq. 31 (errata): −M_f(ω)/J_m in the acceleration channel, ω = z2
+        return -c.fs * (c.M_c * math.tanh(z2 * c.inv_ws) + c.M_v * z2)
+    x = abs(z1) * c.inv_ws
+    # cosh(x) ** 2 is pow(cosh, 2.0); the exponent is a field so that LLVM cannot fold a
+    # constant 2.0 into c * c (which differs from pow in the last bit; records.py)
+    sech2 = 0.0 if x > 30.0 else 1.0 / (math.cosh(x) ** c.two)
+    return -(c.fv + c.fc * sech2) * z2
+
+
+@kernel
+def eso_smc_hint(c, s):
+    return s.z1, s.z2, s.z3 + c.b0 * s.u_in + s.f_k
+
+
+@kernel
+def eso_smc_start(c, s, table, inp, u_prev, h0, h1, h2):
+    z1 = h0 if math.isfinite(h0) else inp.y
+    z2 = h1 if math.isfinite(h1) else 0.0
+    s.z1 = z1
+    s.z2 = z2
+    f_k = friction_term(c, z1, z2)
+    s.f_k = f_k
+    u_applied = inp.u_applied
+    s.u_in = u_applied
+    e = inp.r - z1
+    ed = inp.r_dot - z2
+    if u_prev != u_prev:  # cold start: ∫e from 0 (Eq. 26), no disturbance estimate
+        s.z3 = 0.0
+        s.integral = 0.0
+    else:  # switch: z3 = ÿ − b0 u_applied − f_k; start on the surface (s = 0)
+        a = h2 if math.isfinite(h2) else 0.0
+        s.z3 = a - c.b0 * u_applied - f_k
+        s.integral = -(ed + c.c1 * e) / c.c2
+    sv = ed + c.c1 * e + c.c2 * s.integral
+    s.s = sv
+    nominal = c.eps * sat(sv, c.delta, c.k) + inp.r_ddot + c.c1 * ed + c.c2 * e - f_k
+    u = (nominal - s.z3) / c.b0
+    s.u_raw = u
+    return c.hi if u > c.hi else (c.lo if u < c.lo else u)
+
+
+@kernel
+def eso_smc_update(c, s, table, inp):
+    T = c.T
+    u_applied = inp.u_applied
+    s.u_in = u_applied
+    z3 = s.z3
+    # ESO, Eq. 18 discretised (pneu_control.observers.eso), f_k held
+    z1, z2, z3 = eso3_step(
+        s.z1, s.z2, z3, z3 + c.b0 * u_applied + s.f_k, inp.y, T, c.T2h, c.l1, c.l2, c.l3
+    )
+    s.z1 = z1
+    s.z2 = z2
+    s.z3 = z3
+    r = inp.r
+    r_dot = inp.r_dot
+    r_ddot = inp.r_ddot
+    if c.dc:  # act on the state the command will meet: t + d T
+        z1, z2 = predict3(z1, z2, z3, inp.history, inp.n_hist, c.u_n, c.b0, s.f_k, T, c.T2h)
+        r, r_dot = extrapolate(r, r_dot, r_ddot, c.tau)
+    # sliding surface, Eq. 26 (fixed: double pole at −λ)
+    e = r - z1
+    ed = r_dot - z2
+    integral = s.integral + T * e
+    c1 = c.c1
+    c2 = c.c2
+    sv = ed + c1 * e + c2 * integral
+    s.s = sv
+    if c.fric:
+        f_k = friction_term(c, z1, z2)
+        s.f_k = f_k
+    else:
+        f_k = 0.0
+    # Eq. 30/31 (fixed): ṡ = −ε sat(s)  (Eq. 29)
+    u = (c.eps * sat(sv, c.delta, c.k) + r_ddot + c1 * ed + c2 * e - z3 - f_k) / c.b0
+    s.u_raw = u
+    if c.aw:  # conditional integration (see module docstring)
+        s.integral = conditional_integral(s.integral, integral, e, u, sv, c.lo, c.hi, c.delta)
+    else:
+        s.integral = integral
+    hi = c.hi
+    lo = c.lo
+    return hi if u > hi else (lo if u < lo else u)
+
+
+class EsoSmc(KernelAlgorithm):
     name = "eso_smc"
     uses_td = True
-    uses_theta = False
-    uses_pressures = False
+    CONSTANTS = ESO_SMC_CONSTANTS
+    STATE = ESO_SMC_STATE
+    KERNEL = AlgorithmKernel(eso_smc_start, eso_smc_update, eso_smc_hint)
 
-    def __init__(self, params: AxisControllerParams, axis: str):
+    def constants(self, params: AxisControllerParams, axis: str):
         p = params.eso_smc
         T = params.sample_time_s
-        self.T = T
-        self.T2h = 0.5 * T * T
         lam = p.lambda_r
-        self.c1 = 2.0 * lam  # coefficient of e in s (Eq. 26 fixed)
-        self.c2 = lam * lam  # coefficient of ∫e
-        self.b0 = p.b_0
-        self.eps = p.epsilon
-        self.delta = p.delta
-        self.k = p.k
-        self.aw = p.integral_anti_windup
-        self.l1, self.l2, self.l3 = eso_gains(p.omega_0, T)
-        self.fric = bool(p.friction_compensation) and axis == "rotary"
-        self.angle = axis == "rotary" and params.rotary_model == "angle"
-        self.fs = RPM_PER_RAD_S / p.J_m  # (rpm/s) per (N·m): M_f / J_m in the angle model
-        self.M_c, self.M_v = p.M_c, p.M_v
-        self.fv = RPM_PER_RAD_S * p.M_v / p.J_m  # 1/s
-        self.fc = RPM_PER_RAD_S * p.M_c / (p.J_m * p.coulomb_smoothing)  # 1/s
-        self.inv_ws = 1.0 / p.coulomb_smoothing
+        l1, l2, l3 = eso_gains(p.omega_0, T)
         lim = params.limits
-        self.lo = lim.u_min - lim.u_neutral
-        self.hi = lim.u_max - lim.u_neutral
-        self.dc = p.delay_compensation and params.transport_delay_samples > 0
-        self.tau = params.transport_delay_samples * T
-        self.u_n = lim.u_neutral
-        self.z1 = self.z2 = self.z3 = 0.0
-        self.s = 0.0
-        self.integral = 0.0
-        self.u_raw = 0.0
-        self.f_k = 0.0
-        self.u_in = 0.0
-
-    @property
-    def hint(self) -> tuple[float, float, float]:
-        return self.z1, self.z2, self.z3 + self.b0 * self.u_in + self.f_k
+        return ESO_SMC_CONSTANTS.new(
+            T=T,
+            T2h=0.5 * T * T,
+            c1=2.0 * lam,  # coefficient of e in s (Eq. 26 fixed)
+            c2=lam * lam,  # coefficient of ∫e
+            b0=p.b_0,
+            eps=p.epsilon,
+            delta=p.delta,
+            k=p.k,
+            l1=l1,
+            l2=l2,
+            l3=l3,
+            fs=RPM_PER_RAD_S / p.J_m,  # (rpm/s) per (N·m): M_f / J_m in the angle model
+            M_c=p.M_c,
+            M_v=p.M_v,
+            fv=RPM_PER_RAD_S * p.M_v / p.J_m,  # 1/s
+            fc=RPM_PER_RAD_S * p.M_c / (p.J_m * p.coulomb_smoothing),  # 1/s
+            inv_ws=1.0 / p.coulomb_smoothing,
+            lo=lim.u_min - lim.u_neutral,
+            hi=lim.u_max - lim.u_neutral,
+            tau=params.transport_delay_samples * T,
+            u_n=lim.u_neutral,
+            aw=int(p.integral_anti_windup),
+            dc=int(p.delay_compensation and params.transport_delay_samples > 0),
+            fric=int(bool(p.friction_compensation) and axis == "rotary"),
+            angle=int(axis == "rotary" and params.rotary_model == "angle"),
+        )
 
     def friction_term(self, z1: float, z2: float) -> float:
-        """f_k (rpm/s²) of the rotary friction model; 0 when off."""
-        if not self.fric:
-            return 0.0
-        if self.angle:  # Eq. 31 (errata): −M_f(ω)/J_m in the acceleration channel, ω = z2
-            return -self.fs * (self.M_c * math.tanh(z2 * self.inv_ws) + self.M_v * z2)
-        x = abs(z1) * self.inv_ws
-        sech2 = 0.0 if x > 30.0 else 1.0 / (math.cosh(x) ** 2)
-        return -(self.fv + self.fc * sech2) * z2
-
-    def start(self, inp: StepInput, u_prev, hint):
-        self.z1 = z1 = hint[0] if math.isfinite(hint[0]) else inp.y
-        self.z2 = z2 = hint[1] if math.isfinite(hint[1]) else 0.0
-        f_k = self.friction_term(z1, z2)
-        self.f_k = f_k
-        self.u_in = u_applied = inp.u_applied
-        e = inp.r - z1
-        ed = inp.r_dot - z2
-        if u_prev is None:  # cold start: ∫e from 0 (Eq. 26), no disturbance estimate
-            self.z3 = 0.0
-            self.integral = 0.0
-        else:  # switch: z3 = ÿ − b0 u_applied − f_k; start on the surface (s = 0)
-            a = hint[2] if math.isfinite(hint[2]) else 0.0
-            self.z3 = a - self.b0 * u_applied - f_k
-            self.integral = -(ed + self.c1 * e) / self.c2
-        s = ed + self.c1 * e + self.c2 * self.integral
-        self.s = s
-        nominal = (
-            self.eps * sat(s, self.delta, self.k) + inp.r_ddot + self.c1 * ed + self.c2 * e - f_k
-        )
-        u = (nominal - self.z3) / self.b0
-        self.u_raw = u
-        return self.hi if u > self.hi else (self.lo if u < self.lo else u)
-
-    def update(self, inp: StepInput):
-        T = self.T
-        self.u_in = u_applied = inp.u_applied
-        z3 = self.z3
-        # ESO, Eq. 18 discretised (pneu_control.observers.eso), f_k held
-        z1, z2, z3 = eso3_step(
-            self.z1, self.z2, z3, z3 + self.b0 * u_applied + self.f_k, inp.y, T, self.T2h,
-            self.l1, self.l2, self.l3,
-        )  # fmt: skip
-        self.z1, self.z2, self.z3 = z1, z2, z3
-        r, r_dot, r_ddot = inp.r, inp.r_dot, inp.r_ddot
-        if self.dc:  # act on the state the command will meet: t + d T
-            z1, z2 = predict3(z1, z2, z3, inp.history, self.u_n, self.b0, self.f_k, T, self.T2h)
-            r, r_dot = extrapolate(r, r_dot, r_ddot, self.tau)
-        # sliding surface, Eq. 26 (fixed: double pole at −λ)
-        e = r - z1
-        ed = r_dot - z2
-        integral = self.integral + T * e
-        c1, c2 = self.c1, self.c2
-        s = ed + c1 * e + c2 * integral
-        self.s = s
-        if self.fric:
-            f_k = self.friction_term(z1, z2)
-            self.f_k = f_k
-        else:
-            f_k = 0.0
-        # Eq. 30/31 (fixed): ṡ = −ε sat(s)  (Eq. 29)
-        u = (self.eps * sat(s, self.delta, self.k) + r_ddot + c1 * ed + c2 * e - z3 - f_k) / self.b0
-        self.u_raw = u
-        if self.aw:  # conditional integration (see module docstring)
-            self.integral = conditional_integral(
-                self.integral, integral, e, u, s, self.lo, self.hi, self.delta
-            )
-        else:
-            self.integral = integral
-        hi, lo = self.hi, self.lo
-        return hi if u > hi else (lo if u < lo else u)
+        """f_k (rpm/s²) of the rotary friction model at (z1, z2); 0 when off."""
+        return friction_term(self.c, z1, z2)

@@ -22,8 +22,9 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from pneu_msgs_py.params.core import param
+from pneu_msgs_py.params.records import RecordType, kernel
 
-from pneu_control.algorithms.base import NAN, StepInput
+from pneu_control.algorithms.base import AlgorithmKernel, KernelAlgorithm
 from pneu_control.algorithms.smc import (
     POSITIVE,
     b_0_field,
@@ -35,7 +36,7 @@ from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predic
 if TYPE_CHECKING:
     from pneu_control.controller.params import AxisControllerParams
 
-__all__ = ["Ladrc", "LadrcParams"]
+__all__ = ["LADRC_CONSTANTS", "LADRC_STATE", "Ladrc", "LadrcParams", "ladrc_start", "ladrc_update"]
 
 
 @dataclass(frozen=True)
@@ -58,64 +59,89 @@ class LadrcParams:
     delay_compensation: bool = delay_compensation_field()
 
 
-class Ladrc:
+LADRC_CONSTANTS = RecordType(
+    "LadrcConstants",
+    [
+        ("T", "f"), ("T2h", "f"), ("kp", "f"), ("kd", "f"), ("b0", "f"), ("ff", "f"),
+        ("l1", "f"), ("l2", "f"), ("l3", "f"), ("lo", "f"), ("hi", "f"), ("tau", "f"),
+        ("u_n", "f"), ("dc", "i"),
+    ],
+)  # fmt: skip
+LADRC_STATE = RecordType(
+    "LadrcState",
+    [("z1", "f", 0.0), ("z2", "f", 0.0), ("z3", "f", 0.0), ("s", "f"), ("u_raw", "f", 0.0),
+     ("u_in", "f", 0.0)],
+)  # fmt: skip
+
+
+@kernel
+def ladrc_hint(c, s):
+    return s.z1, s.z2, s.z3 + c.b0 * s.u_in
+
+
+@kernel
+def ladrc_start(c, s, table, inp, u_prev, h0, h1, h2):
+    s.z1 = h0 if math.isfinite(h0) else inp.y
+    s.z2 = h1 if math.isfinite(h1) else 0.0
+    # z3 = ÿ − b0 u_applied: physically consistent (ÿ = 0 if unknown; cold start: 0)
+    a = h2 if math.isfinite(h2) else 0.0
+    u_applied = inp.u_applied
+    s.u_in = u_applied
+    s.z3 = 0.0 if u_prev != u_prev else a - c.b0 * u_applied
+    u0 = c.kp * (inp.r - s.z1) + c.kd * (inp.r_dot - s.z2) + c.ff * inp.r_ddot
+    u = (u0 - s.z3) / c.b0
+    s.u_raw = u
+    return c.hi if u > c.hi else (c.lo if u < c.lo else u)
+
+
+@kernel
+def ladrc_update(c, s, table, inp):
+    T = c.T
+    u_applied = inp.u_applied
+    s.u_in = u_applied
+    z3 = s.z3
+    # ESO, Eq. 18 discretised (pneu_control.observers.eso)
+    z1, z2, z3 = eso3_step(s.z1, s.z2, z3, z3 + c.b0 * u_applied, inp.y, T, c.T2h, c.l1, c.l2, c.l3)
+    s.z1 = z1
+    s.z2 = z2
+    s.z3 = z3
+    r = inp.r
+    r_dot = inp.r_dot
+    r_ddot = inp.r_ddot
+    if c.dc:  # act on the state the command will meet: t + d T (see eso_smc)
+        z1, z2 = predict3(z1, z2, z3, inp.history, inp.n_hist, c.u_n, c.b0, 0.0, T, c.T2h)
+        r, r_dot = extrapolate(r, r_dot, r_ddot, c.tau)
+    u0 = c.kp * (r - z1) + c.kd * (r_dot - z2) + c.ff * r_ddot
+    u = (u0 - z3) / c.b0
+    s.u_raw = u
+    return c.hi if u > c.hi else (c.lo if u < c.lo else u)
+
+
+class Ladrc(KernelAlgorithm):
     name = "ladrc"
     uses_td = True
-    uses_theta = False
-    uses_pressures = False
+    CONSTANTS = LADRC_CONSTANTS
+    STATE = LADRC_STATE
+    KERNEL = AlgorithmKernel(ladrc_start, ladrc_update, ladrc_hint)
 
-    def __init__(self, params: AxisControllerParams, axis: str):
+    def constants(self, params: AxisControllerParams, axis: str):
         p = params.ladrc
         T = params.sample_time_s
-        self.T = T
-        self.T2h = 0.5 * T * T
-        self.kp = p.lambda_1 * p.lambda_1
-        self.kd = 2.0 * p.lambda_1
-        self.b0 = p.b_0
-        self.ff = 1.0 if p.accel_feedforward else 0.0
-        self.l1, self.l2, self.l3 = eso_gains(p.omega_0, T)
+        l1, l2, l3 = eso_gains(p.omega_0, T)
         lim = params.limits
-        self.lo = lim.u_min - lim.u_neutral
-        self.hi = lim.u_max - lim.u_neutral
-        self.dc = p.delay_compensation and params.transport_delay_samples > 0
-        self.tau = params.transport_delay_samples * T
-        self.u_n = lim.u_neutral
-        self.z1 = self.z2 = self.z3 = 0.0
-        self.s = NAN
-        self.u_raw = 0.0
-        self.u_in = 0.0
-
-    @property
-    def hint(self) -> tuple[float, float, float]:
-        return self.z1, self.z2, self.z3 + self.b0 * self.u_in
-
-    def start(self, inp: StepInput, u_prev, hint):
-        self.z1 = hint[0] if math.isfinite(hint[0]) else inp.y
-        self.z2 = hint[1] if math.isfinite(hint[1]) else 0.0
-        # z3 = ÿ − b0 u_applied: physically consistent (ÿ = 0 if unknown; cold start: 0)
-        a = hint[2] if math.isfinite(hint[2]) else 0.0
-        self.u_in = u_applied = inp.u_applied
-        self.z3 = 0.0 if u_prev is None else a - self.b0 * u_applied
-        u0 = self.kp * (inp.r - self.z1) + self.kd * (inp.r_dot - self.z2) + self.ff * inp.r_ddot
-        u = (u0 - self.z3) / self.b0
-        self.u_raw = u
-        return self.hi if u > self.hi else (self.lo if u < self.lo else u)
-
-    def update(self, inp: StepInput):
-        T = self.T
-        self.u_in = u_applied = inp.u_applied
-        z3 = self.z3
-        # ESO, Eq. 18 discretised (pneu_control.observers.eso)
-        z1, z2, z3 = eso3_step(
-            self.z1, self.z2, z3, z3 + self.b0 * u_applied, inp.y, T, self.T2h,
-            self.l1, self.l2, self.l3,
-        )  # fmt: skip
-        self.z1, self.z2, self.z3 = z1, z2, z3
-        r, r_dot, r_ddot = inp.r, inp.r_dot, inp.r_ddot
-        if self.dc:  # act on the state the command will meet: t + d T (see eso_smc)
-            z1, z2 = predict3(z1, z2, z3, inp.history, self.u_n, self.b0, 0.0, T, self.T2h)
-            r, r_dot = extrapolate(r, r_dot, r_ddot, self.tau)
-        u0 = self.kp * (r - z1) + self.kd * (r_dot - z2) + self.ff * r_ddot
-        u = (u0 - z3) / self.b0
-        self.u_raw = u
-        return self.hi if u > self.hi else (self.lo if u < self.lo else u)
+        return LADRC_CONSTANTS.new(
+            T=T,
+            T2h=0.5 * T * T,
+            kp=p.lambda_1 * p.lambda_1,
+            kd=2.0 * p.lambda_1,
+            b0=p.b_0,
+            ff=1.0 if p.accel_feedforward else 0.0,
+            l1=l1,
+            l2=l2,
+            l3=l3,
+            lo=lim.u_min - lim.u_neutral,
+            hi=lim.u_max - lim.u_neutral,
+            tau=params.transport_delay_samples * T,
+            u_n=lim.u_neutral,
+            dc=int(p.delay_compensation and params.transport_delay_samples > 0),
+        )

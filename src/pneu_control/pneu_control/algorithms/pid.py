@@ -24,14 +24,15 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from pneu_msgs_py.params.core import param
+from pneu_msgs_py.params.records import RecordType, kernel
 
-from pneu_control.algorithms.base import NAN, StepInput
+from pneu_control.algorithms.base import NAN, AlgorithmKernel, KernelAlgorithm
 from pneu_control.algorithms.smc import NONNEGATIVE, POSITIVE
 
 if TYPE_CHECKING:
     from pneu_control.controller.params import AxisControllerParams
 
-__all__ = ["Pid", "PidParams"]
+__all__ = ["PID_CONSTANTS", "PID_STATE", "Pid", "PidParams", "pid_start", "pid_update"]
 
 
 @dataclass(frozen=True)
@@ -76,82 +77,105 @@ class PidParams:
     )
 
 
-class Pid:
-    name = "pid"
-    uses_td = False
-    uses_theta = False
-    uses_pressures = False
+AW_CODES = {"conditional": 0, "back_calculation": 1, "none": 2}
 
-    def __init__(self, params: AxisControllerParams, axis: str):
+PID_CONSTANTS = RecordType(
+    "PidConstants",
+    [
+        ("T", "f"), ("kp", "f"), ("ki", "f"), ("kd", "f"), ("a_d", "f"), ("a_y", "f"),
+        ("kb", "f"), ("lo", "f"), ("hi", "f"), ("on_error", "i"), ("aw", "i"),
+    ],
+)  # fmt: skip
+PID_STATE = RecordType(
+    "PidState",
+    [
+        ("z1", "f"), ("z2", "f"), ("z3", "f"), ("s", "f"), ("u_raw", "f", 0.0),
+        ("integral", "f", 0.0), ("d", "f", 0.0), ("y_f", "f", 0.0), ("r_dot", "f", 0.0),
+    ],
+)  # fmt: skip
+
+
+@kernel
+def pid_hint(c, s):
+    return s.y_f, (s.r_dot - s.d if c.on_error else -s.d), NAN
+
+
+@kernel
+def pid_start(c, s, table, inp, u_prev, h0, h1, h2):
+    y = inp.y
+    r_dot = inp.r_dot
+    s.y_f = y
+    s.r_dot = r_dot
+    yd = h1 if math.isfinite(h1) else 0.0
+    s.d = (r_dot - yd) if c.on_error else -yd
+    e = inp.r - y
+    if u_prev != u_prev:  # NaN: a cold start
+        s.integral = 0.0
+    else:  # bumpless: choose I so that the output equals u_prev
+        i = u_prev - c.kp * e - c.kd * s.d
+        s.integral = min(max(i, c.lo), c.hi)
+    u = c.kp * e + s.integral + c.kd * s.d
+    s.u_raw = u
+    return c.hi if u > c.hi else (c.lo if u < c.lo else u)
+
+
+@kernel
+def pid_update(c, s, table, inp):
+    T = c.T
+    y_prev = s.y_f
+    y_f = y_prev + c.a_y * (inp.y - y_prev)
+    s.y_f = y_f
+    r_dot = inp.r_dot
+    s.r_dot = r_dot
+    dy = (y_f - y_prev) / T
+    d_in = r_dot - dy if c.on_error else -dy
+    a = c.a_d
+    d = a * s.d + (1.0 - a) * d_in
+    s.d = d
+    e = inp.r - y_f
+    di = c.ki * e * T
+    integral = s.integral + di
+    u = c.kp * e + integral + c.kd * d
+    hi = c.hi
+    lo = c.lo
+    if u > hi:
+        u_sat = hi
+    elif u < lo:
+        u_sat = lo
+    else:
+        u_sat = u
+    aw = c.aw
+    if aw == 0:  # conditional
+        if (u > hi and di > 0.0) or (u < lo and di < 0.0):
+            integral -= di  # conditional integration
+        integral = hi if integral > hi else (lo if integral < lo else integral)
+    elif aw == 1:  # back_calculation
+        integral += c.kb * (u_sat - u)
+    s.integral = integral
+    s.u_raw = u
+    return u_sat
+
+
+class Pid(KernelAlgorithm):
+    name = "pid"
+    CONSTANTS = PID_CONSTANTS
+    STATE = PID_STATE
+    KERNEL = AlgorithmKernel(pid_start, pid_update, pid_hint)
+
+    def constants(self, params: AxisControllerParams, axis: str):
         p = params.pid
         T = params.sample_time_s
-        self.T = T
-        self.kp, self.ki, self.kd = p.kp, p.ki, p.kd
-        self.a_d = math.exp(-T / p.tf)
-        self.a_y = 1.0 - math.exp(-T / p.y_filter_tf) if p.y_filter_tf > 0.0 else 1.0
-        self.on_error = p.derivative_on == "error"
-        self.aw = p.anti_windup
-        self.kb = T / p.tt
         lim = params.limits
-        self.lo = lim.u_min - lim.u_neutral
-        self.hi = lim.u_max - lim.u_neutral
-        self.z1 = self.z2 = self.z3 = self.s = NAN
-        self.u_raw = 0.0
-        self.integral = 0.0
-        self.d = 0.0
-        self.y_f = 0.0
-        self.r_dot = 0.0
-
-    @property
-    def hint(self) -> tuple[float, float, float]:
-        return self.y_f, (self.r_dot - self.d if self.on_error else -self.d), NAN
-
-    def start(self, inp: StepInput, u_prev, hint):
-        y, r, r_dot = inp.y, inp.r, inp.r_dot
-        self.y_f = y
-        self.r_dot = r_dot
-        yd = hint[1] if math.isfinite(hint[1]) else 0.0
-        self.d = (r_dot - yd) if self.on_error else -yd
-        e = r - y
-        if u_prev is None:
-            self.integral = 0.0
-        else:  # bumpless: choose I so that the output equals u_prev
-            i = u_prev - self.kp * e - self.kd * self.d
-            self.integral = min(max(i, self.lo), self.hi)
-        u = self.kp * e + self.integral + self.kd * self.d
-        self.u_raw = u
-        return self.hi if u > self.hi else (self.lo if u < self.lo else u)
-
-    def update(self, inp: StepInput):
-        y, r_dot = inp.y, inp.r_dot
-        T = self.T
-        y_prev = self.y_f
-        y_f = y_prev + self.a_y * (y - y_prev)
-        self.y_f = y_f
-        self.r_dot = r_dot
-        dy = (y_f - y_prev) / T
-        d_in = r_dot - dy if self.on_error else -dy
-        a = self.a_d
-        d = a * self.d + (1.0 - a) * d_in
-        self.d = d
-        e = inp.r - y_f
-        di = self.ki * e * T
-        integral = self.integral + di
-        u = self.kp * e + integral + self.kd * d
-        hi, lo = self.hi, self.lo
-        if u > hi:
-            u_sat = hi
-        elif u < lo:
-            u_sat = lo
-        else:
-            u_sat = u
-        aw = self.aw
-        if aw == "conditional":
-            if (u > hi and di > 0.0) or (u < lo and di < 0.0):
-                integral -= di  # conditional integration
-            integral = hi if integral > hi else (lo if integral < lo else integral)
-        elif aw == "back_calculation":
-            integral += self.kb * (u_sat - u)
-        self.integral = integral
-        self.u_raw = u
-        return u_sat
+        return PID_CONSTANTS.new(
+            T=T,
+            kp=p.kp,
+            ki=p.ki,
+            kd=p.kd,
+            a_d=math.exp(-T / p.tf),
+            a_y=1.0 - math.exp(-T / p.y_filter_tf) if p.y_filter_tf > 0.0 else 1.0,
+            kb=T / p.tt,
+            lo=lim.u_min - lim.u_neutral,
+            hi=lim.u_max - lim.u_neutral,
+            on_error=int(p.derivative_on == "error"),
+            aw=AW_CODES[p.anti_windup],
+        )

@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import Any
 
 from pneu_msgs_py.params.core import param
+from pneu_msgs_py.params.records import kernel
 
 __all__ = [
     "POSITIVE",
@@ -33,6 +34,7 @@ POSITIVE = {"lo": 0.0, "lo_open": True}  # strictly positive
 NONNEGATIVE = {"lo": 0.0}
 
 
+@kernel
 def sat(s: float, delta: float, k: float) -> float:
     """Eq. 29: sign(s) outside the boundary layer |s| > Δ, k s inside."""
     if s > delta:
@@ -42,6 +44,7 @@ def sat(s: float, delta: float, k: float) -> float:
     return k * s
 
 
+@kernel
 def conditional_integral(
     integral: float,
     integral_next: float,

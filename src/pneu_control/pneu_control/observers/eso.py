@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import math
 
+from pneu_msgs_py.params.records import kernel
+
 __all__ = ["eso_gains", "eso_error_matrix", "eso3_step", "predict3", "extrapolate", "LinearEso"]
 
 
@@ -52,6 +54,7 @@ def eso_error_matrix(omega_0: float, T: float) -> list[list[float]]:
     return [[phi[i][j] - lc[i] * phi[0][j] for j in range(3)] for i in range(3)]
 
 
+@kernel
 def eso3_step(
     z1: float,
     z2: float,
@@ -76,33 +79,23 @@ def eso3_step(
     return z1p + l1 * ey, z2p + l2 * ey, z3 + l3 * ey
 
 
-def predict3(
-    z1: float,
-    z2: float,
-    z3: float,
-    history: list[float],
-    u_n: float,
-    b0: float,
-    f_k: float,
-    T: float,
-    T2h: float,
-    to_linear=None,
-) -> tuple[float, float]:
+@kernel
+def predict3(z1, z2, z3, history, n_hist, u_n, b0, f_k, T, T2h):
     """(z1, z2) run over the transport delay with the commands already sent (Smith predictor).
 
-    ``history``: commands in V, oldest first (the one on the valve during the
-    last period, then the d commands in the pipe); the model acceleration
-    over each is z3 + b0 (u − u_n) + f_k, with ``to_linear`` applied to the
-    deviation when the algorithm linearises the valve.
+    ``history[:n_hist]``: commands in V, oldest first (the one on the valve during the
+    last period, then the d commands in the pipe); the model acceleration over each
+    is z3 + b0 (u − u_n) + f_k.
     """
-    for i in range(1, len(history)):
+    for i in range(1, n_hist):
         du = history[i] - u_n
-        acc = z3 + b0 * (du if to_linear is None else to_linear(du)) + f_k
+        acc = z3 + b0 * du + f_k
         z1 += T * z2 + T2h * acc
         z2 += T * acc
     return z1, z2
 
 
+@kernel
 def extrapolate(r: float, r_dot: float, r_ddot: float, tau: float) -> tuple[float, float]:
     """(r, ṙ) at t + τ from the reference and its derivatives at t (second order)."""
     return r + tau * r_dot + 0.5 * tau * tau * r_ddot, r_dot + tau * r_ddot

@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["fhan", "TrackingDifferentiator"]
+from pneu_msgs_py.params.records import kernel
+
+__all__ = ["fhan", "td_step", "TrackingDifferentiator"]
 
 
 def fhan(x1: float, x2: float, u: float, r: float, h: float) -> float:
@@ -54,20 +56,21 @@ class TrackingDifferentiator:
         self.v1, self.v2, self.v3 = float(v1), float(v2), 0.0
 
     def step(self, x_ref: float) -> None:
-        v1, v2, r, h = self.v1, self.v2, self.r, self.h
-        # fhan inlined (Eq. 24) -- hot path
-        d = r * h
-        y = v1 - x_ref + h * v2
-        ay = abs(y)
-        if ay <= d * h:
-            a = v2 + y / h
-        else:
-            a = v2 + 0.5 * (math.sqrt(d * d + 8.0 * r * ay) - d) * (1.0 if y > 0.0 else -1.0)
-        if -d <= a <= d:
-            fst = -r * a / d
-        else:
-            fst = -r if a > 0.0 else r
-        T = self.T
-        self.v1 = v1 + T * v2  # Eq. 23
-        self.v2 = v2 + T * fst
-        self.v3 = fst
+        self.v1, self.v2, self.v3 = td_step(self.v1, self.v2, x_ref, self.r, self.h, self.T)
+
+
+@kernel
+def td_step(v1, v2, x_ref, r, h, T):
+    """One sample of Eq. 23 with fhan (Eq. 24) inlined: returns (v1, v2, v3 = fst)."""
+    d = r * h
+    y = v1 - x_ref + h * v2
+    ay = abs(y)
+    if ay <= d * h:
+        a = v2 + y / h
+    else:
+        a = v2 + 0.5 * (math.sqrt(d * d + 8.0 * r * ay) - d) * (1.0 if y > 0.0 else -1.0)
+    if -d <= a <= d:
+        fst = -r * a / d
+    else:
+        fst = -r if a > 0.0 else r
+    return v1 + T * v2, v2 + T * fst, fst  # Eq. 23
