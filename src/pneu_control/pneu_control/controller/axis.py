@@ -59,7 +59,18 @@ from pneu_control.controller.params import AxisControllerParams
 from pneu_control.controller.references import axis_scale, make_reference
 from pneu_control.observers.td import td_step
 
-__all__ = ["AXIS_CONSTANTS", "AXIS_STATE", "AxisController", "ControllerState", "STATE_FIELDS"]
+# the algorithms that position a rotary angle (rotary_control: angle): the generic
+# second-order laws, and coast (one-way drive, the paper's plumbing)
+ANGLE_ALGORITHMS = ("pid", "ladrc", "eso_smc", "coast")
+
+__all__ = [
+    "ANGLE_ALGORITHMS",
+    "AXIS_CONSTANTS",
+    "AXIS_STATE",
+    "AxisController",
+    "ControllerState",
+    "STATE_FIELDS",
+]
 
 _NAN = float("nan")
 
@@ -101,7 +112,8 @@ AXIS_CONSTANTS = RecordType(
     "AxisConstants",
     [
         ("scale", "f"), ("T", "f"), ("neutral", "f"), ("td_r", "f"), ("td_h", "f"),
-        ("linear", "i"), ("angle", "i"), ("td_on", "i"), ("uses_td", "i"),
+        ("measured", "i"),  # MEASURE_X, MEASURE_OMEGA or MEASURE_THETA
+        ("angle", "i"), ("td_on", "i"), ("uses_td", "i"),
     ],
 )  # fmt: skip
 AXIS_STATE = RecordType(
@@ -111,6 +123,19 @@ AXIS_STATE = RecordType(
         ("td_v1", "f", 0.0), ("td_v2", "f", 0.0), ("td_v3", "f", 0.0),
     ],
 )  # fmt: skip
+
+
+MEASURE_X, MEASURE_OMEGA, MEASURE_THETA = 0, 1, 2
+
+
+@kernel
+def measured(a, x, omega, theta):
+    """The controlled output in SI: x (m) linear, ω (rad/s) rotary speed, θ (rad) rotary angle."""
+    if a.measured == MEASURE_X:
+        return x
+    if a.measured == MEASURE_OMEGA:
+        return omega
+    return theta
 
 
 @kernel
@@ -223,8 +248,9 @@ class AxisController:
         if axis not in ("linear", "rotary"):
             raise ParamError("axis", axis, "one of linear, rotary")
         self.axis = axis
-        self._scale = axis_scale(axis)
         self._linear = axis == "linear"
+        self._control = "position" if self._linear else params.rotary_control
+        self._scale = axis_scale(axis, params.rotary_control)
         self._angle = axis == "rotary" and params.rotary_model == "angle"
         built = self._build(params)
         self._commit(built)
@@ -242,7 +268,29 @@ class AxisController:
             raise ParamError(
                 "eso_smc.friction_compensation", True, "false on the linear axis (Eq. 31 is rotary)"
             )
-        ref = make_reference(params.reference, self.axis, sample_time_s=params.sample_time_s)
+        angle_control = not self._linear and params.rotary_control == "angle"
+        if angle_control and params.algorithm == "eso_smc" and params.eso_smc.friction_compensation:
+            raise ParamError(
+                "eso_smc.friction_compensation",
+                True,
+                "false with rotary_control: angle (Eq. 31 is the speed loop's)",
+            )
+        if angle_control and params.algorithm not in ANGLE_ALGORITHMS:
+            raise ParamError(
+                "algorithm",
+                params.algorithm,
+                f"one of {', '.join(ANGLE_ALGORITHMS)} with rotary_control: angle",
+            )
+        if not angle_control and params.algorithm == "coast":
+            raise ParamError(
+                "algorithm",
+                "coast",
+                "pid, ladrc, eso_smc or eso_smc_plus (coast positions an angle: "
+                "rotary_control: angle)",
+            )
+        ref = make_reference(
+            params.reference, self.axis, params.sample_time_s, rotary_control=params.rotary_control
+        )
         alg = make_algorithm(params, self.axis)
         return params, ref, alg
 
@@ -269,7 +317,9 @@ class AxisController:
             neutral=params.limits.u_neutral,
             td_r=float(params.td.r),
             td_h=float(params.td.h),
-            linear=int(self._linear),
+            measured=MEASURE_X
+            if self._linear
+            else (MEASURE_THETA if params.rotary_control == "angle" else MEASURE_OMEGA),
             angle=int(self._angle),
             td_on=int(params.td.enabled),
             uses_td=int(alg.uses_td),
@@ -302,6 +352,12 @@ class AxisController:
                 "transport_delay_samples",
                 params.transport_delay_samples,
                 f"read-only at run time ({old.transport_delay_samples})",
+            )
+        if params.rotary_control != old.rotary_control:
+            raise ParamError(
+                "rotary_control",
+                params.rotary_control,
+                f"read-only at run time ({old.rotary_control})",
             )
         if params.rotary_model != old.rotary_model:
             raise ParamError(
@@ -338,11 +394,12 @@ class AxisController:
         if self._t0_ns is None:
             self._t0_ns = stamp
         t = (stamp - self._t0_ns) * 1e-9
-        y_si = sample.x if self._linear else sample.omega
+        c = self._c
+        y_si = measured(c, sample.x, sample.omega, sample.theta)
         r, rd, rdd = self._ref(t)
         self._t, self._r, self._rd, self._y = t, r, rd, y_si
         self._dirty = True
-        c, st, inp = self._c, self._st, self._inp
+        st, inp = self._st, self._inp
         pending = self._pending
         needs_theta = self._alg.uses_theta or (pending is not None and pending[2].uses_theta)
         ok, y, th = measure(c, inp, y_si, sample.theta, sample.p_c1, sample.p_c2, needs_theta)

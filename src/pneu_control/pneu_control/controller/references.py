@@ -29,7 +29,7 @@ import math
 from pathlib import Path
 from typing import Protocol
 
-from pneu_msgs_py.contract.units import MM_PER_M, RPM_PER_RAD_S
+from pneu_msgs_py.contract.units import DEG_PER_RAD, MM_PER_M, RPM_PER_RAD_S
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.records import Record, RecordType, kernel
 
@@ -52,12 +52,13 @@ __all__ = [
 _TWO_PI = 2.0 * math.pi
 
 
-def axis_scale(axis: str) -> float:
-    """Paper units per SI unit: 1000 (mm per m) linear, 9.549 (rpm per rad/s) rotary."""
+def axis_scale(axis: str, rotary_control: str = "speed") -> float:
+    """Paper units per SI unit: 1000 (mm per m) linear, 9.549 (rpm per rad/s) rotary speed,
+    57.30 (degrees per rad) rotary angle (``rotary_control: angle``)."""
     if axis == "linear":
         return MM_PER_M
     if axis == "rotary":
-        return RPM_PER_RAD_S
+        return DEG_PER_RAD if rotary_control == "angle" else RPM_PER_RAD_S
     raise ParamError("axis", axis, "one of linear, rotary")
 
 
@@ -370,9 +371,11 @@ def _is_number(s: str) -> bool:
     return True
 
 
-def make_reference(p: ReferenceParams, axis: str, sample_time_s: float = 0.001) -> Reference:
-    """Build the reference of ``p`` (paper units) as an SI callable for ``axis``."""
-    u = 1.0 / axis_scale(axis)
+def make_reference(
+    p: ReferenceParams, axis: str, sample_time_s: float = 0.001, rotary_control: str = "speed"
+) -> Reference:
+    """Build the reference of ``p`` (paper units: mm, rpm or degrees) as an SI callable for ``axis``."""
+    u = 1.0 / axis_scale(axis, rotary_control)
     if p.kind == "sine":
         f_nyq = 0.5 / sample_time_s
         if not 0.0 < p.frequency_hz < f_nyq:

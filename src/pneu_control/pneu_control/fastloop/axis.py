@@ -18,7 +18,14 @@ from numba import njit
 from pneu_control.algorithms.eso_smc import EsoSmc
 from pneu_control.algorithms.ladrc import Ladrc
 from pneu_control.algorithms.pid import Pid
-from pneu_control.controller.axis import cold_inputs, finish, measure, state_values, step_inputs
+from pneu_control.controller.axis import (
+    cold_inputs,
+    finish,
+    measure,
+    measured,
+    state_values,
+    step_inputs,
+)
 from pneu_control.controller.references import reference_at
 from pneu_control.fastloop.layout import JIT
 
@@ -80,7 +87,7 @@ def axis_update(a, ac, ast, inp, rc, knots, code, algs, tab, uses_theta, t, x, o
 
     Records the state values and u into ``rec[k, col:col + 12]``.
     """
-    y_si = x if ac.linear else omega
+    y_si = measured(ac, x, omega, theta)
     r, rd, rdd = reference_at(rc, knots, t)
     ok, y, th = measure(ac, inp, y_si, theta, p_c1, p_c2, uses_theta)
     if not ok:  # NaN/inf: the last command again (n_nonfinite in Python)
