@@ -12,7 +12,8 @@
   analyze, executed), docs/results.md's generated blocks (the columns and rows
   ``pneu paper`` writes; ``tools/results_doc.py`` round trip), docs/design.md's
   experiments and gains (the catalogue, config/controllers.yaml), docs/ros2.md's node
-  table (each package's console scripts), docs/choices.md's fault list.
+  table (each package's console scripts), docs/choices.md's fault list, docs/calibration.md's
+  parameters, tolerances and plants (the identification study's).
 (The topic table and the exit codes have their own tests beside their modules.)
 """
 
@@ -286,7 +287,7 @@ def test_the_readme_first_run_prints_what_the_readme_says(tmp_path, capsys):
         capsys.readouterr()
         assert main(argv[1:]) == 0, line
         out[argv[1]] = capsys.readouterr().out
-    assert out["analyze"] == shown
+    assert out["analyze"] == shown, f"the README's first run now prints:\n{out['analyze']}"
     assert (tmp_path / "first" / "run.png").stat().st_size > 0
 
 
@@ -311,7 +312,9 @@ def test_results_nominal_block_is_what_pneu_paper_writes():
     rows = [_cells(line) for line in block.splitlines()[2:]]
     assert all(len(r) == n_cols for r in rows)
     expected = [(e.id, c, g) for e in PAPER_EXPERIMENTS for c, g in runs_for(e)]
-    assert [tuple(r[:3]) for r in rows] == expected
+    assert [tuple(r[:3]) for r in rows] == expected, (
+        "docs/results.md's rows are not pneu paper's: regenerate them with bash tools/paper.sh"
+    )
 
 
 def test_results_uncertainty_block_has_the_summary_columns():
@@ -427,3 +430,25 @@ def test_choices_list_every_fault_the_twin_injects():
 def test_every_page_has_one_title(path):
     titles = [line for _, line in _prose(path) if line.startswith("# ")]
     assert len(titles) == 1, titles
+
+
+def test_calibration_tables_are_the_studys_parameters_tolerances_and_plants():
+    from pneu_control.sysid.study import PERTURBATIONS, TOLERANCE
+
+    text = _section(
+        ROOT / "docs" / "calibration.md",
+        "# Calibrating the twin on a rig: excite → identify → validate → tune",
+    )
+    errors = [r for r in _table_rows(text) if re.fullmatch(r"[\w. σ]+ \(±[\d.]+( %)?\)", r[0])]
+    assert len(errors) == len(TOLERANCE) + 2  # noise σ of p_c1, p_c2 and p_m1 share noise.p
+    for cells in errors:
+        name, tol = re.fullmatch(r"(.+) \(±([\d.]+(?: %)?)\)", cells[0]).groups()
+        key = {"noise σ x": "noise.x"}.get(
+            name, "noise.p" if name.startswith("noise σ p") else name
+        )
+        kind, value = TOLERANCE[key]
+        stated = ("rel", float(tol[:-2]) / 100) if tol.endswith(" %") else ("abs", float(tol))
+        assert kind == stated[0] and math.isclose(value, stated[1]), (cells[0], TOLERANCE[key])
+        assert len(cells) == 1 + len(PERTURBATIONS), cells[0]
+    held_out = [r for r in _table_rows(text) if len(r) == 5 and r[0] in PERTURBATIONS]
+    assert [r[0] for r in held_out] == list(PERTURBATIONS)
