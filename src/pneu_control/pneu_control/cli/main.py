@@ -93,7 +93,7 @@ def _one_line(text: str) -> str:
 
 
 def main(argv: list[str] | None = None, *, restore_signals: bool = True) -> int:
-    """Run one subcommand; return its exit code (README: 0, 1, 2, 3, 129, 130, 143).
+    """Run one subcommand; return its exit code (docs/cli.md: 0, 1, 2, 3, 129, 130, 143).
 
     ``restore_signals`` False (the ``pneu`` process itself): after the command, signals
     stay recorded-only, so one arriving while the interpreter shuts down changes nothing.

@@ -20,7 +20,7 @@ SIGTERM and SIGHUP stop the loop (the main thread polls
 the valves safe) and the files are then finished inside
 :func:`~pneu_msgs_py.lifecycle.signals.deferred`, marked interrupted: a second
 signal cannot cut them. A killed process leaves no bag (and, on the rig, the
-valves as they were: README, "Safety on the real rig").
+valves as they were: docs/rig.md, "Safety on the real rig").
 """
 
 from __future__ import annotations

@@ -57,7 +57,7 @@ its last value.
 What the card does when this process cannot run ``close`` (killed, crashed,
 hung): M Series AO keep their last value and the DO line its last level; after
 a device reset or power-up the AO go to 0 V -- a fully open MPYE. Only the
-external interlock on the heartbeat makes that safe (README, "Safety on the
+external interlock on the heartbeat makes that safe (docs/rig.md, "Safety on the
 real rig").
 """
 
