@@ -77,7 +77,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _series(result, exp: Experiment, label: str, m) -> Series:
-    from pneu_control.experiment.runner import _MEASURED
+    from pneu_control.experiment.runner import MEASURED
 
     cols = result.axes[exp.axis]
     return Series(
@@ -85,7 +85,7 @@ def _series(result, exp: Experiment, label: str, m) -> Series:
         axis=exp.axis,
         t=result.t,
         reference=cols["reference"],
-        measured=result.samples[_MEASURED[exp.axis]],
+        measured=result.samples[MEASURED[exp.axis]],
         u=cols["u"],
         window_s=(m.window_start_s, m.window_end_s),
     )

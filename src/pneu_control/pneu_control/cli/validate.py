@@ -63,7 +63,7 @@ def _figure(i: int, bag: str) -> str:
 def run(args: argparse.Namespace) -> int:
     from pneu_sim.physics.plant_file import load_plant
 
-    from pneu_control.cli.identify import _resolve
+    from pneu_control.cli.identify import resolve_bag
     from pneu_control.sysid.record import load_record
     from pneu_control.sysid.validate import plot_validation, validate_record, write_report
 
@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         raise ParamError("--horizon", args.horizon, "> 0 s (inf: never restart)")
     if args.min_fit is not None and not math.isfinite(args.min_fit):
         raise ParamError("--min-fit", args.min_fit, "a finite percentage (fits are <= 100 %)")
-    bags = [_resolve(b) for b in args.bags]
+    bags = [resolve_bag(b) for b in args.bags]
     claim = None
     if args.out:
         names = ["validate.json", *(_figure(i, b) for i, b in enumerate(bags))]

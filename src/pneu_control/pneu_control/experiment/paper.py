@@ -19,7 +19,15 @@ from pneu_control.analysis.metrics import AxisMetrics
 from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, Experiment
 from pneu_control.experiment.runner import RunResult
 
-__all__ = ["IMPROVED", "PaperRow", "paper_rows", "render_markdown", "run_paper"]
+__all__ = [
+    "IMPROVED",
+    "PaperRow",
+    "first_trip",
+    "in_band",
+    "paper_rows",
+    "render_markdown",
+    "run_paper",
+]
 
 # our controller beyond the paper, run on the experiments it is compared on, with its
 # design-rule gains from controllers.yaml (gain set "design")
@@ -103,7 +111,7 @@ def runs_for(exp: Experiment) -> list[tuple[str, str]]:
     return pairs
 
 
-def _first_trip(result: RunResult, axis: str) -> str | None:
+def first_trip(result: RunResult, axis: str) -> str | None:
     """The supervisor's first ERROR on ``axis`` ("overspeed at 0.412 s"), if any."""
     for ev in result.safety_events:
         if ev.level == "ERROR" and ev.axis in (axis, "all"):
@@ -157,8 +165,8 @@ def run_paper(
             result, m = runner(exp, controller, gains, run_dir)
             band_ok = None
             if exp.band is not None and math.isfinite(m.e_max):
-                band_ok = _in_band(result, exp, m)
-            trip = _first_trip(result, exp.axis)
+                band_ok = in_band(result, exp, m)
+            trip = first_trip(result, exp.axis)
             row = row_from_metrics(exp, controller, gains, m, run_dir.name, band_ok, trip)
             if exp.window.average_s > 0.0 and math.isfinite(m.e_max):
                 raw = raw_metrics(result, exp, m)
@@ -186,23 +194,23 @@ def run_paper(
 def raw_metrics(result: RunResult, exp: Experiment, m: AxisMetrics) -> AxisMetrics:
     """``m``'s window on the unaveraged measurement (the raw encoder speed): the
     one-revolution mean hides what a low-bandwidth controller leaves in the speed."""
-    from pneu_control.analysis.metrics import WindowSpec
-    from pneu_control.experiment.runner import _MEASURED, axis_metrics
+    from pneu_control.analysis.metrics import WindowSpec, axis_metrics
+    from pneu_control.experiment.runner import MEASURED
 
     w = WindowSpec(kind="fixed", t_start_s=m.window_start_s, t_end_s=m.window_end_s)
     cols = result.axes[exp.axis]
-    y = result.samples[_MEASURED[exp.axis]]
+    y = result.samples[MEASURED[exp.axis]]
     return axis_metrics(exp.axis, result.t, cols["reference"], y, w, result.fault_intervals)
 
 
-def _in_band(result: RunResult, exp: Experiment, m: AxisMetrics) -> bool:
+def in_band(result: RunResult, exp: Experiment, m: AxisMetrics) -> bool:
     """Does the (averaged) measured speed stay inside the paper's band in the window?"""
     import numpy as np
 
     from pneu_control.analysis.metrics import moving_average
-    from pneu_control.experiment.runner import _MEASURED
+    from pneu_control.experiment.runner import MEASURED
 
-    y = result.samples[_MEASURED[exp.axis]]
+    y = result.samples[MEASURED[exp.axis]]
     n_avg = max(1, int(round(exp.window.average_s / float(result.t[1] - result.t[0]))))
     y = moving_average(y, n_avg) * (60.0 / (2.0 * math.pi))
     mask = (result.t >= m.window_start_s) & (result.t <= m.window_end_s)
