@@ -74,10 +74,12 @@ class WindowSpec:
             )
 
     def to_dict(self) -> dict:
+        """The window as plain data (metrics.json, the bag's ``pneu.run`` record)."""
         return asdict(self)
 
     @staticmethod
     def from_dict(d: dict) -> WindowSpec:
+        """The window of :meth:`to_dict`'s output."""
         return WindowSpec(**d)
 
 
@@ -120,6 +122,7 @@ class AxisMetrics:
 
     @property
     def window_s(self) -> list[float]:
+        """``[window start, window end]`` in s."""
         return [self.window_start_s, self.window_end_s]
 
     def why_empty(self) -> str:
@@ -154,6 +157,7 @@ class AxisMetrics:
         )
 
     def to_dict(self) -> dict:
+        """The metrics as plain data, with ``window_s``."""
         d = asdict(self)
         d["window_s"] = self.window_s
         return d

@@ -73,6 +73,8 @@ class AxisTrace:
 
 @dataclass
 class RunAnalysis:
+    """What :func:`analyze` found in one bag: config echo, metrics and traces per axis, warnings."""
+
     path: str
     config: dict[str, Any]
     metrics: dict[str, AxisMetrics]
@@ -84,6 +86,7 @@ class RunAnalysis:
 
     @property
     def interrupted(self) -> bool:
+        """Did the run end on a signal (its ``pneu.end`` record says so)?"""
         return self.end.get("interrupted") == "true"
 
     def status_line(self) -> str:
@@ -103,6 +106,7 @@ class RunAnalysis:
         return ""
 
     def to_dict(self) -> dict[str, Any]:
+        """The analysis as plain data (``pneu analyze --json``); traces left out."""
         return {
             "path": self.path,
             "interrupted": self.interrupted,

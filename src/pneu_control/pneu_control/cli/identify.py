@@ -20,6 +20,7 @@ HELP = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu identify`` options on ``p``."""
     p.add_argument("bags", nargs="+", metavar="BAG", help=".mcap files or rosbag2 directories")
     p.add_argument(
         "--out",
@@ -51,6 +52,8 @@ def resolve_bag(bag: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu identify``: fit the plant to the bags, write the plant.yaml and its report; the exit
+    code."""
     from pneu_msgs_py.params.paths import config_file
     from pneu_msgs_py.params.yaml_file import from_option, load_yaml, located
     from pneu_sim.physics.plant_file import params_from_tree

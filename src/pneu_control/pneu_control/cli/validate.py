@@ -18,6 +18,7 @@ HELP = "replay bags through a twin (open loop on the recorded voltages, or close
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu validate`` options on ``p``."""
     p.add_argument("bags", nargs="+", metavar="BAG")
     p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
     p.add_argument("--mode", choices=("open", "closed", "auto"), default="open",
@@ -61,6 +62,8 @@ def _figure(i: int, bag: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu validate``: replay each bag through the twin, write the report and overlays; the exit
+    code."""
     from pneu_sim.physics.plant_file import load_plant
 
     from pneu_control.cli.identify import resolve_bag

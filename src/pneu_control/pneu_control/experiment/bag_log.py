@@ -110,6 +110,8 @@ def run_metadata(echo: dict[str, Any]) -> dict[str, dict[str, str]]:
 
 
 def open_run_bag(path: str | Path, spec: Any, echo: dict[str, Any]) -> BagWriter:
+    """A :class:`BagWriter` at ``path`` for an in-process run, with the run's metadata
+    (``echo``)."""
     return BagWriter(
         path,
         metadata=run_metadata(echo),

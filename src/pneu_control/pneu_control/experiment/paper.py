@@ -62,6 +62,9 @@ def absolute_supply_plant(plant):
 
 @dataclass(frozen=True)
 class PaperRow:
+    """One row of the paper table: our e_max and RMSE beside the paper's, with the run's window and
+    seeds."""
+
     id: str
     axis: str
     controller: str
@@ -86,6 +89,7 @@ class PaperRow:
     rmse_raw: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The row as plain data, with the ratios to the paper's figures."""
         d = dict(self.__dict__)
         d["ratio_e_max"] = _ratio(self.e_max, self.paper_e_max)
         d["ratio_rmse"] = _ratio(self.rmse, self.paper_rmse)
@@ -99,6 +103,7 @@ def _ratio(ours: float, paper: float | None) -> float | None:
 
 
 def run_dir_name(exp: Experiment, controller: str, gains: str) -> str:
+    """The run's directory name: ``EXPERIMENT__CONTROLLER__GAINS``."""
     return f"{exp.id}__{controller}__{gains}"
 
 
@@ -128,6 +133,7 @@ def row_from_metrics(
     band_ok=None,
     safety_trip: str | None = None,
 ):
+    """The :class:`PaperRow` of one run's metrics, with the paper's figures for that controller."""
     paper = exp.paper.get(controller, (None, None))
     return PaperRow(
         id=exp.id,
@@ -233,6 +239,7 @@ def _spread(mean: float | None, worst: float | None, n: int) -> str:
 
 
 def render_markdown(rows: list[PaperRow]) -> str:
+    """The rows as the Markdown table of paper_table.md."""
     lines = [
         "| experiment | controller | gains | e_max | paper e_max | ratio | RMSE | paper RMSE | ratio "
         "| e_max mean / worst over seeds | RMSE mean / worst | raw speed e_max / RMSE | window (s) |",
@@ -259,6 +266,8 @@ def render_markdown(rows: list[PaperRow]) -> str:
 def write_table(
     rows: list[PaperRow], out_dir: str | Path, extra: dict[str, Any] | None = None
 ) -> None:
+    """paper_table.json (rows and ``extra``) and paper_table.md into ``out_dir``, each renamed when
+    complete."""
     out = Path(out_dir)
     doc = {"experiments": [r.to_dict() for r in rows]}
     if extra:
@@ -272,4 +281,5 @@ def write_table(
 
 
 def paper_rows(path: str | Path) -> list[dict[str, Any]]:
+    """The rows of a paper_table.json, as plain dicts."""
     return json.loads(Path(path).read_text())["experiments"]

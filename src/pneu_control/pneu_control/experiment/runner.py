@@ -103,6 +103,7 @@ class RunResult:
         return simulated / self.wall_s if self.wall_s > 0 else math.inf
 
     def metrics_dict(self) -> dict[str, Any]:
+        """The metrics of each axis as plain data."""
         return {axis: m.to_dict() for axis, m in self.metrics.items()}
 
     def save(self, out_dir: str | Path, config_echo: dict[str, Any] | None = None) -> Path:
@@ -145,7 +146,7 @@ class _Rows:
     """Rows of floats recorded per cycle into an array preallocated for the whole run.
 
     Rows are gathered in a short list and copied in blocks (a numpy row write
-    per cycle costs ten times a list append), so memory is the array plus one
+    per cycle costs far more than a list append), so memory is the array plus one
     block, and :meth:`rows` always returns whole rows only.
     """
 

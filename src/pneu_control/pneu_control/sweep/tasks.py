@@ -37,6 +37,9 @@ def simulate(spec: RunSpec) -> RunResult:
 
 @dataclass(frozen=True)
 class SweepTask:
+    """One run of a sweep: its place in the table, plant sample, experiment, controller, gain set
+    and spec."""
+
     index: int  # position in the table
     sample: int
     experiment: Experiment
