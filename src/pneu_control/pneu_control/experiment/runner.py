@@ -231,6 +231,7 @@ def run(
         plant, axes=spec.axes, x0=spec.x0, supervisor=sup, faults=spec.faults, seed=spec.seed
     )
     rec = _Recording(n, ctrls, faulty=cycle.injector is not None)
+    algorithms = {axis: c.algorithm for axis, c in ctrls.items()}  # as the run starts
     t_wall = time.perf_counter()
     m, interrupted = _cycles(cycle, ctrls, rec, n, bag, progress)
     wall = time.perf_counter() - t_wall
@@ -247,7 +248,7 @@ def run(
         wall,
         interrupted=interrupted,
         truth=truth,
-        algorithms={axis: c.algorithm for axis, c in ctrls.items()},
+        algorithms=algorithms,
     )
 
 
