@@ -70,6 +70,7 @@ def _available() -> list[tuple[str, object]]:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``pneu`` parser with one subcommand per module of :data:`SUBCOMMANDS`."""
     parser = _Parser(
         prog="pneu",
         description="pneu: servo stack for a linear-rotary pneumatic actuator (twin, controllers, bags).",
