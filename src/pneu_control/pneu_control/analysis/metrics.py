@@ -170,15 +170,17 @@ def compute_metrics(
     measured: np.ndarray,
     spec: WindowSpec,
     exclude: np.ndarray | None = None,
+    units: tuple[str, float] | None = None,
 ) -> AxisMetrics:
     """e_max and RMSE (Eq. 37) of ``reference − measured`` over the window.
 
-    Arrays are SI (m or rad/s) sampled at the control period. ``exclude`` is a
-    boolean mask of samples to leave out (e.g. fault intervals).
+    Arrays are SI (m, rad/s or rad) sampled at the control period. ``exclude`` is a
+    boolean mask of samples to leave out (e.g. fault intervals). ``units``: (unit,
+    scale) of the report (default the axis's: mm, rpm; ``ANGLE_UNITS`` for an angle).
     """
     if axis not in UNITS:
         raise ValueError(f"axis: {axis!r} refused; allowed: linear, rotary")
-    unit, scale = UNITS[axis]
+    unit, scale = UNITS[axis] if units is None else units
     t = np.asarray(t, dtype=float)
     reference = np.asarray(reference, dtype=float)
     measured = np.asarray(measured, dtype=float)
@@ -209,7 +211,7 @@ def compute_metrics(
     )
 
 
-def axis_metrics(axis, t, reference, measured, window, intervals, include_faults=False):
+def axis_metrics(axis, t, reference, measured, window, intervals, include_faults=False, units=None):
     """DESIGN §7 metrics without the fault intervals (unless ``include_faults``) and non-finite samples."""
     bad = ~(np.isfinite(measured) & np.isfinite(reference))
     exclude = bad if bad.any() else None
@@ -217,4 +219,4 @@ def axis_metrics(axis, t, reference, measured, window, intervals, include_faults
         fm = exclusion_mask(t, intervals, axis)
         if fm is not None:
             exclude = fm if exclude is None else (exclude | fm)
-    return compute_metrics(axis, t, reference, measured, window, exclude=exclude)
+    return compute_metrics(axis, t, reference, measured, window, exclude=exclude, units=units)

@@ -27,6 +27,7 @@ __all__ = ["main", "SUBCOMMANDS"]
 SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("sim", "pneu_sim.cli.sim"),
     ("run", "pneu_control.cli.run"),
+    ("task", "pneu_control.cli.task"),
     ("rig", "pneu_control.cli.rig"),
     ("paper", "pneu_control.cli.paper"),
     ("sweep", "pneu_control.cli.sweep"),

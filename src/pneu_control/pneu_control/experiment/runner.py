@@ -34,11 +34,28 @@ from pneu_sim.physics.plant import Plant
 from pneu_control.analysis.metrics import AxisMetrics, WindowSpec, axis_metrics
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
 
-__all__ = ["MEASURED", "SAMPLE_FIELDS", "RunResult", "RunSpec", "result_of", "run"]
+__all__ = [
+    "ANGLE_UNITS",
+    "MEASURED",
+    "SAMPLE_FIELDS",
+    "measured_of",
+    "RunResult",
+    "RunSpec",
+    "result_of",
+    "run",
+]
 
 SAMPLE_FIELDS = ("p_c1", "p_c2", "p_m1", "x", "theta", "omega", "counts")
-#: axis -> the sample field its metrics are taken on
+#: axis -> the sample field its metrics are taken on (rotary angle control: see measured_of)
 MEASURED = {"linear": "x", "rotary": "omega"}
+ANGLE_UNITS = ("°", 180.0 / math.pi)  # rotary_control: angle reports in degrees
+
+
+def measured_of(axis: str, params: Any) -> tuple[str, tuple[str, float] | None]:
+    """(sample field, report units or None for the axis's own) of what ``params`` controls."""
+    if axis == "rotary" and getattr(params, "rotary_control", "speed") == "angle":
+        return "theta", ANGLE_UNITS
+    return MEASURED[axis], None
 
 
 def _default_safety() -> Any:
@@ -197,8 +214,13 @@ def run(
     *,
     bag: Any | None = None,
     progress: Callable[[float], None] | None = None,
+    hook: Callable[[int, Any, RigCycle, dict[str, Any]], bool] | None = None,
 ) -> RunResult:
     """Run ``spec`` in lockstep. ``bag``: an open ``BagWriter`` to log into.
+
+    ``hook(k, s_k, cycle, controllers)``: called at the start of every cycle, before
+    the controllers answer s_k (a task switches references and loads there); True
+    ends the run after the cycles so far (a task that finished or aborted).
 
     With ``spec.safety`` (the default) every command passes through a
     :class:`pneu_driver.safety.supervisor.SafetySupervisor` before it reaches the plant,
@@ -233,7 +255,7 @@ def run(
     rec = _Recording(n, ctrls, faulty=cycle.injector is not None)
     algorithms = {axis: c.algorithm for axis, c in ctrls.items()}  # as the run starts
     t_wall = time.perf_counter()
-    m, interrupted = _cycles(cycle, ctrls, rec, n, bag, progress)
+    m, interrupted = _cycles(cycle, ctrls, rec, n, bag, progress, hook)
     wall = time.perf_counter() - t_wall
     t, samples, axes, held, truth = rec.arrays(m)
     return result_of(
@@ -316,6 +338,7 @@ def _cycles(
     n: int,
     bag: Any | None,
     progress: Callable[[float], None] | None,
+    hook: Callable[..., bool] | None = None,
 ) -> tuple[int, bool]:
     """Up to ``n`` cycles of :func:`run` (its docstring gives the order within one):
     (cycles recorded completely, interrupted?)."""
@@ -335,6 +358,8 @@ def _cycles(
         for k in range(n):
             if sig.pending is not None:  # SIGINT/SIGTERM/SIGHUP under signals.deferred()
                 interrupted = True
+                break
+            if hook is not None and hook(k, s, cycle, ctrls):
                 break
             stamp = s.stamp_ns
             if faulty:
@@ -402,11 +427,12 @@ def result_of(
     metrics: dict[str, AxisMetrics] = {}
     for axis, cols in axes.items():
         window = spec.windows.get(axis, WindowSpec(kind="fixed"))
-        measured = samples[MEASURED[axis]]
+        name, units = measured_of(axis, spec.controllers[axis])
         if m > 1:
             metrics[axis] = axis_metrics(
-                axis, t, cols["reference"], measured, window, faults, spec.include_faults
-            )
+                axis, t, cols["reference"], samples[name], window, faults, spec.include_faults,
+                units,
+            )  # fmt: skip
     return RunResult(
         spec,
         t,

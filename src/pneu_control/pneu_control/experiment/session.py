@@ -284,6 +284,7 @@ def execute(
     overwrite: bool = False,
     live: Any | None = None,
     echo_overrides: dict[str, Any] | None = None,
+    hook: Any | None = None,
 ) -> RunResult:
     """Run ``spec``; write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP bag.
 
@@ -298,6 +299,7 @@ def execute(
     ``live``: a :class:`pneu_msgs_py.live.server.LiveServer` that gets every cycle
     too (after the bag); the caller closes it. ``echo_overrides`` replace entries of
     the recorded config (e.g. a blind identification study hides the twin's parameters).
+    ``hook``: the runner's per-cycle hook (:func:`pneu_control.experiment.runner.run`).
     """
     claim = (
         out_dir
@@ -315,7 +317,7 @@ def execute(
 
                 writer = open_run_bag(claim.final(bag_name), spec, echo)
             sink = writer if live is None else (live if writer is None else Tee(writer, live))
-            result = run(spec, bag=sink, progress=report)
+            result = run(spec, bag=sink, progress=report, hook=hook)
             if result.interrupted and len(result.t) == 0:
                 raise signals.Interrupted(signals.pending() or 2)
         except BaseException as err:
