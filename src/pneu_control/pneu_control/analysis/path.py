@@ -60,7 +60,8 @@ class JointError:
 
 @dataclass(frozen=True)
 class PathReport:
-    """Per-joint errors (SI) and the path error in mm, with the r_eq that made it."""
+    """Per-joint errors (SI) and the path error in mm, with the r_eq that made it (NaN: no
+    rotary joint)."""
 
     joints: dict[str, JointError]
     path_max_mm: float
@@ -77,8 +78,9 @@ class PathReport:
                 f"{e.joint}: e_max {e.e_max * k:.4g} {u}, RMSE {e.rmse * k:.4g} {u}, "
                 f"final {e.final * k:.4g} {u}"
             )
+        scale = "" if math.isnan(self.r_eq_m) else f" (r_eq = {self.r_eq_m * MM_PER_M:.4g} mm/rad)"
         lines.append(
-            f"path (r_eq = {self.r_eq_m * MM_PER_M:.4g} mm/rad): max {self.path_max_mm:.4g} mm, "
+            f"path{scale}: max {self.path_max_mm:.4g} mm, "
             f"RMS {self.path_rms_mm:.4g} mm over {self.n_samples} samples"
         )
         return "\n".join(lines)

@@ -139,58 +139,29 @@ class JointTrajectory:
             raise ParamError("points", list(pts), "at least one point")
         if self.r_eq_m is not None and not (_finite(self.r_eq_m) and self.r_eq_m > 0.0):
             raise ParamError("r_eq_m", self.r_eq_m, "(0, inf) m or None")
-        n = len(names)
         clean = []
         t_prev = None
         for i, p in enumerate(pts):
             if not isinstance(p, TrajectoryPoint):
                 raise ParamError(f"points[{i}]", p, "a TrajectoryPoint")
-            key = f"points[{i}]"
             t = p.time_from_start
             if not _finite(t):
-                raise ParamError(f"{key}.time_from_start", t, "a finite number of s")
-            t = float(t)
+                raise ParamError(f"points[{i}].time_from_start", t, "a finite number of s")
             if t_prev is None and t < 0.0:
-                raise ParamError(f"{key}.time_from_start", t, ">= 0 s")
+                raise ParamError(f"points[{i}].time_from_start", float(t), ">= 0 s")
             if t_prev is not None and t <= t_prev:
                 raise ParamError(
-                    f"{key}.time_from_start", t, f"> {t_prev:g} s (strictly increasing)"
+                    f"points[{i}].time_from_start",
+                    float(t),
+                    f"> {t_prev:g} s (strictly increasing)",
                 )
-            t_prev = t
-            at_end = i in (0, len(pts) - 1)
-            lists = []
-            for field, required in (
-                ("positions", True),
-                ("velocities", False),
-                ("accelerations", False),
-            ):
-                vals = getattr(p, field)
-                vals = (
-                    tuple(vals)
-                    if isinstance(vals, Sequence) and not isinstance(vals, str)
-                    else vals
-                )
-                if not isinstance(vals, tuple) or len(vals) not in ((n,) if required else (0, n)):
-                    want = f"{n} values, one per joint ({', '.join(names)})"
-                    raise ParamError(
-                        f"{key}.{field}", vals, want if required else want + ", or none"
-                    )
-                for j, v in enumerate(vals):
-                    unit = _SI_UNIT[names[j]] + {"positions": "", "velocities": "/s"}.get(
-                        field, "/s^2"
-                    )
-                    if not _finite(v):
-                        raise ParamError(
-                            f"{key}.{field}[{j}]", v, f"a finite number ({unit}, joint {names[j]})"
-                        )
-                    if field != "positions" and at_end and float(v) != 0.0:
-                        raise ParamError(
-                            f"{key}.{field}[{j}]",
-                            v,
-                            "0 at the first and last point (the reference holds them at rest)",
-                        )
-                lists.append(tuple(float(v) for v in vals))
-            clean.append(TrajectoryPoint(*lists, time_from_start=t))
+            t_prev = float(t)
+            at_rest = i in (0, len(pts) - 1)
+            values = [
+                _clean_values(f"points[{i}].{field}", getattr(p, field), names, field, at_rest)
+                for field in ("positions", "velocities", "accelerations")
+            ]
+            clean.append(TrajectoryPoint(*values, time_from_start=t_prev))
         object.__setattr__(self, "joint_names", names)
         object.__setattr__(self, "points", tuple(clean))
 
@@ -215,6 +186,30 @@ class JointTrajectory:
     def positions(self, joint: str) -> tuple[float, ...]:
         j = self.index(joint)
         return tuple(p.positions[j] for p in self.points)
+
+
+def _clean_values(
+    key: str, vals: Any, names: tuple[str, ...], field: str, at_rest: bool
+) -> tuple[float, ...]:
+    """One value list of a point as floats: one per joint (or none for derivatives)."""
+    n = len(names)
+    if hasattr(vals, "__len__") and not isinstance(vals, (str, Mapping)):
+        vals = tuple(vals)
+    allowed = (n,) if field == "positions" else (0, n)
+    if not isinstance(vals, tuple) or len(vals) not in allowed:
+        want = f"{n} values, one per joint ({', '.join(names)})"
+        raise ParamError(key, vals, want if field == "positions" else want + ", or none")
+    per = {"positions": "", "velocities": "/s", "accelerations": "/s^2"}[field]
+    for j, v in enumerate(vals):
+        if not _finite(v):
+            raise ParamError(
+                f"{key}[{j}]", v, f"a finite number ({_SI_UNIT[names[j]]}{per}, joint {names[j]})"
+            )
+        if field != "positions" and at_rest and v != 0.0:
+            raise ParamError(
+                f"{key}[{j}]", v, "0 at the first and last point (the reference holds them at rest)"
+            )
+    return tuple(float(v) for v in vals)
 
 
 def _finite(v: Any) -> bool:
