@@ -18,12 +18,18 @@ acceleration of :class:`Waypoints`. It holds the first point before it and the
 last after it, at rest, so the first and last points must be at rest
 (velocities and accelerations 0 where given).
 
+Feeding the axis controllers: the linear axis takes ``joint_reference(traj,
+"linear")`` as its position reference (m); the rotary axis takes
+``joint_reference(traj, "rotary")`` as its angle reference (rad) under
+``rotary_control: angle``. Under speed control it needs θ̇, θ̈, θ⃛: the kernel
+gives θ̇ and θ̈ (its r_dot, r_ddot), not θ⃛ (the Hermite is C² only).
+
 Shapes (each returns a :class:`JointTrajectory`, checked against the safety
 limits of ``config/safety.yaml``; see :func:`check_limits`):
 
 - :func:`screw`: a helix, x = x0 + p (θ − θ0)/(2π), both joints moving together;
-  the path parameter φ = θ − θ0 accelerates to the cruise rate over ``ramp``
-  s with φ̈ = ω_c 6u(1 − u)/ramp (u = τ/ramp, so φ̇ = ω_c (3u² − 2u³): C²),
+  the path parameter φ = θ − θ0 accelerates to the cruise rate ω_c over
+  ``ramp_s`` = D s with φ̈ = ω_c 6u(1 − u)/D (u = τ/D, so φ̇ = ω_c (3u² − 2u³): C²),
   cruises, and decelerates symmetrically;
 - :func:`insert_then_twist`: x0 → x0 + dx, dwell, then θ0 → θ0 + dθ;
 - :func:`twist_while_retracting`: θ0 → θ0 + dθ over ``duration`` s while
