@@ -28,7 +28,8 @@ Segments (targets chain: a segment starts where the previous one's reference end
   ``duration_s`` (Eq. 38's smooth step: peak speed 2Δ/D);
 - ``rotate``: the rotary angle to ``to_deg`` or by ``by_deg`` or ``turns``, at peak
   ``speed_rpm`` or in ``duration_s`` (smooth step on the angle);
-- ``spin``: turn at ``speed_rpm`` for ``duration_s`` (a ramp of the angle), then hold;
+- ``spin``: turn at ``speed_rpm`` for ``duration_s`` (smooth speed ramps of
+  min(0.25 s, duration/3) inside it), then hold;
 - ``screw``: helix of ``pitch_mm`` per turn over ``turns`` at ``rate_turns_s``
   (:func:`pneu_control.controller.trajectory.screw`); both joints move together;
 - ``dwell``: hold for ``duration_s``; ``wait``: hold until its ``until`` holds.
@@ -62,6 +63,7 @@ from pneu_msgs_py.params.yaml_file import load_yaml
 
 __all__ = [
     "KINDS",
+    "SPIN_RAMP_S",
     "Segment",
     "TaskProgram",
     "load_task",
@@ -72,6 +74,7 @@ KINDS = ("move", "rotate", "spin", "screw", "dwell", "wait")
 CONDITIONS = ("settled", "pressure", "force", "time")
 SENSORS = ("p_c1", "p_c2", "p_m1")
 DEG_S_PER_RPM = 6.0  # 1 rpm = 360°/60 s
+SPIN_RAMP_S = 0.25  # s: a spin reaches its speed (and leaves it) over min(this, duration/3)
 _MOTION_FIELDS = {
     "move": {"to_mm", "by_mm", "speed_mm_s", "duration_s"},
     "rotate": {"to_deg", "by_deg", "turns", "speed_rpm", "duration_s"},
@@ -366,7 +369,8 @@ def _plan(kind, args, at, x, th, safety, one_way) -> tuple[float, float, float]:
         _forward(f"{at}.speed_rpm", rpm, one_way, "rpm")
         _check_rpm(f"{at}.speed_rpm", rpm, safety)
         dur = _number(f"{at}.duration_s", args["duration_s"], "s", positive=True)
-        return x, th + rpm * DEG_S_PER_RPM * dur / DEG_PER_RAD, dur
+        cruise = dur - min(SPIN_RAMP_S, dur / 3.0)  # the ramps in and out (task/plan.py)
+        return x, th + rpm * DEG_S_PER_RPM * cruise / DEG_PER_RAD, dur
     if kind == "screw":
         for key in ("pitch_mm", "turns", "rate_turns_s"):
             if key not in args:

@@ -143,16 +143,14 @@ def task_figure(path: Path, driver: TaskDriver, result: Any) -> None:
 def path_errors(driver: TaskDriver, result: Any) -> None:
     """The path error of each helix (screw) segment, from the recorded joints, into its result."""
     from pneu_control.analysis.path import path_distances
-    from pneu_control.controller.trajectory import screw
+    from pneu_control.task.plan import segment_trajectory
+    from pneu_control.task.runner import START_DELAY_S
 
     t = result.t
     for seg, r in zip(driver.program.segments, driver.results):
         if seg.kind != "screw" or not math.isfinite(r.t_start_s):
             continue
-        traj = screw(
-            seg.x_start, seg.theta_start, seg.args["pitch_mm"] / MM_PER_M, seg.args["turns"],
-            seg.args["rate_turns_s"], seg.args.get("ramp_s", 0.25), t0=r.t_start_s,
-        )  # fmt: skip
+        traj = segment_trajectory(seg, r.t_start_s + START_DELAY_S)
         end = r.t_end_s if math.isfinite(r.t_end_s) else t[-1]
         m = (t >= r.t_start_s) & (t <= end)
         if m.sum() < 2:

@@ -21,12 +21,22 @@ from typing import Any
 
 from pneu_msgs_py.contract.units import DEG_PER_RAD, MM_PER_M
 
-from pneu_control.controller.references import Constant, Ramp, SmoothStep
-from pneu_control.task.program import DEG_S_PER_RPM, Segment, TaskProgram
+from pneu_control.task.program import Segment, TaskProgram
 
-__all__ = ["SAFE_TAIL_S", "SegmentResult", "TaskDriver", "rod_force"]
+__all__ = [
+    "SAFE_TAIL_S",
+    "START_DELAY_S",
+    "segment_references",
+    "SegmentResult",
+    "TaskDriver",
+    "rod_force",
+]
 
 SAFE_TAIL_S = 0.2  # s the run goes on with both valves safe after an abort (seen in the bag)
+# a segment's trajectory starts this long after the sample that started it: time for a
+# trajectory published over ROS to reach the controllers (the in-process runner waits too,
+# so both give the same numbers)
+START_DELAY_S = 0.01
 
 
 def rod_force(p_c1: float, p_c2: float, A_c1: float, A_c2: float, p_a: float) -> float:
@@ -126,7 +136,7 @@ class TaskDriver:
         u = seg.until
         kind = u["kind"]
         if kind == "time":
-            return t - self.t_seg >= seg.duration_s
+            return t - self.t_seg >= seg.duration_s + START_DELAY_S
         if kind == "pressure":
             v = getattr(s, u["sensor"])
             return v > u["value"] if u["side"] == "above" else v < u["value"]
@@ -134,7 +144,7 @@ class TaskDriver:
             f = rod_force(s.p_c1, s.p_c2, *self._areas)
             return f > u["value"] if u["side"] == "above" else f < u["value"]
         # settled: both joints within tolerance of the targets, for for_s, after the motion
-        if t - self.t_seg < seg.duration_s:
+        if t - self.t_seg < seg.duration_s + START_DELAY_S:
             return False
         ok = abs(seg.x_end - s.x) * MM_PER_M <= u["tol_mm"] and (
             abs(seg.theta_end - s.theta) * DEG_PER_RAD <= u["tol_deg"]
@@ -169,32 +179,7 @@ def _load_kwargs(load: dict[str, Any]) -> dict[str, Any]:
 
 def segment_references(seg: Segment, t0: float) -> dict[str, Any]:
     """Each joint's reference (SI: m, rad; t on the controllers' time base) for ``seg``."""
-    hold_x, hold_th = Constant(seg.x_start), Constant(seg.theta_start)
-    d = seg.duration_s
-    if seg.kind == "move":
-        ref = SmoothStep(seg.x_start, seg.x_end, d, t0) if d > 0.0 else Constant(seg.x_end)
-        return {"linear": ref, "rotary": hold_th}
-    if seg.kind == "rotate":
-        ref = (
-            SmoothStep(seg.theta_start, seg.theta_end, d, t0)
-            if d > 0.0
-            else Constant(seg.theta_end)
-        )
-        return {"linear": hold_x, "rotary": ref}
-    if seg.kind == "spin":
-        w = seg.args["speed_rpm"] * DEG_S_PER_RPM / DEG_PER_RAD  # rad/s
-        return {"linear": hold_x, "rotary": Ramp(seg.theta_start, w, d, t0)}
-    if seg.kind == "screw":
-        from pneu_control.controller.trajectory import references, screw
+    from pneu_control.controller.trajectory import references
+    from pneu_control.task.plan import segment_trajectory
 
-        traj = screw(
-            seg.x_start,
-            seg.theta_start,
-            seg.args["pitch_mm"] / MM_PER_M,
-            seg.args["turns"],
-            seg.args["rate_turns_s"],
-            seg.args.get("ramp_s", 0.25),
-            t0=t0,
-        )
-        return dict(references(traj))
-    return {"linear": hold_x, "rotary": hold_th}  # dwell, wait
+    return dict(references(segment_trajectory(seg, t0 + START_DELAY_S)))

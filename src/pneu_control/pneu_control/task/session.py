@@ -84,10 +84,12 @@ def prepare(
         safety = load_safety_params(safety_file)
     if plumbing is not None and plumbing not in ("paper", "bidirectional"):
         raise ParamError("--plumbing", plumbing, "paper or bidirectional")
-    base_plumbing = plumbing or plant.rotary.plumbing
+    base_plumbing = plumbing or getattr(plant.rotary, "plumbing", "paper")
     program = load_task(task_file, safety=safety, plant_plumbing=base_plumbing)
     effective = plumbing or program.plumbing or base_plumbing
-    updates: dict[str, Any] = {"rotary.plumbing": effective}
+    updates: dict[str, Any] = (
+        {"rotary.plumbing": effective} if hasattr(plant.rotary, "plumbing") else {}
+    )
     updates.update({_load_key(k): v for k, v in program.loads.items()})
     try:
         plant = with_updates(plant, updates)
