@@ -25,8 +25,14 @@ until the condition is gone *and* :meth:`SafetySupervisor.acknowledge` (or
   reference reached the end stop at 75.3 mm under a "hold" that never tripped,
   so the run reported OK). The trip makes that visible (exit code 3); it can
   be acknowledged while the piston is still out there, so a controller can
-  retract it (the hold keeps refusing the other way). Every transition is queued as a :class:`SafetyEvent` for
-``/diagnostics`` and the bag (:meth:`~SafetySupervisor.events` drains them).
+  retract it (the hold keeps refusing the other way).
+
+Every transition is queued as a :class:`SafetyEvent` for ``/diagnostics`` and the
+bag (:meth:`~SafetySupervisor.events` drains them).
+
+The decisions themselves are :mod:`pneu_driver.safety.rules` (kernels on records,
+the same source the compiled closed loop runs); this module words them as events,
+latches them and handles acknowledge, reset and the e-stop.
 
 Time: all stamps are int nanoseconds on one clock (the sample clock). A
 command carries the stamp of the sample it answers; ``outputs(now_ns)`` gets
