@@ -2,7 +2,8 @@
 
 - :mod:`.params` -- ``SafetyParams`` (``config/safety.yaml``) and its loader;
 - :mod:`.events` -- levels, ``SafetyEvent`` transitions and ``AxisStatus``;
-- :mod:`.supervisor` -- ``SafetySupervisor``, the per-axis state machine.
+- :mod:`.rules` -- the decision rules, written once as kernels on records (Python and compiled);
+- :mod:`.supervisor` -- ``SafetySupervisor``, the per-axis state machine around them.
 """
 
 from pneu_driver.safety.events import (

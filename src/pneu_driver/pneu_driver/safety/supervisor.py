@@ -25,8 +25,14 @@ until the condition is gone *and* :meth:`SafetySupervisor.acknowledge` (or
   reference reached the end stop at 75.3 mm under a "hold" that never tripped,
   so the run reported OK). The trip makes that visible (exit code 3); it can
   be acknowledged while the piston is still out there, so a controller can
-  retract it (the hold keeps refusing the other way). Every transition is queued as a :class:`SafetyEvent` for
-``/diagnostics`` and the bag (:meth:`~SafetySupervisor.events` drains them).
+  retract it (the hold keeps refusing the other way).
+
+Every transition is queued as a :class:`SafetyEvent` for ``/diagnostics`` and the
+bag (:meth:`~SafetySupervisor.events` drains them).
+
+The decisions themselves are :mod:`pneu_driver.safety.rules` (kernels on records,
+the same source the compiled closed loop runs); this module words them as events,
+latches them and handles acknowledge, reset and the e-stop.
 
 Time: all stamps are int nanoseconds on one clock (the sample clock). A
 command carries the stamp of the sample it answers; ``outputs(now_ns)`` gets
@@ -43,40 +49,28 @@ from typing import Any
 from pneu_msgs_py.contract.samples import AXES, U_MAX_V, U_MIN_V, SensorSample
 from pneu_msgs_py.params.core import validate
 
-from pneu_driver.safety.events import (
-    ERROR,
-    OK,
-    SAFE_V,
-    SENSOR_AXIS,
-    WARN,
-    AxisStatus,
-    SafetyEvent,
-)
+from pneu_driver.safety import rules
+from pneu_driver.safety.events import ERROR, OK, SAFE_V, WARN, AxisStatus, SafetyEvent
 from pneu_driver.safety.params import SafetyParams
+from pneu_driver.safety.rules import ANALOG, KEY_AXIS, KEY_SENSOR, SENSOR_KEYS
 
 __all__ = ["SafetySupervisor"]
 
-_ANALOG = ("p_c1", "p_c2", "p_m1", "x")  # raw_volts order: (p_c1, p_c2, p_m1, laser)
-_FIELD_SENSOR = {
-    "p_c1": "p_c1",
-    "p_c2": "p_c2",
-    "p_m1": "p_m1",
-    "x": "x",
-    "theta": "encoder",
-    "omega": "encoder",
-}
-_TWO_PI = 2.0 * math.pi
+_AXIS_INDEX = {axis: a for a, axis in enumerate(AXES)}
+_SANITY_GROUP = {axis: f"sanity:{axis}" for axis in AXES}
+_LIVE_KEYS = 15 << rules.LIVE_RANGE
 
 
 def _fmt(v: Any) -> str:
     return f"{v:.6g}" if isinstance(v, float) else str(v)
 
 
-_SANITY_GROUP = {axis: f"sanity:{axis}" for axis in AXES}
-
-
 class SafetySupervisor:
     """Per-axis safety state machine (see the module docstring for the rules).
+
+    The decisions are :mod:`pneu_driver.safety.rules` (shared with the compiled closed
+    loop); this class keeps what they lead to: the events and their messages, the
+    latches, acknowledge/reset, the e-stop and the counters.
 
     Not thread-safe: call it from one thread (the driver loop wraps it in a lock).
     """
@@ -91,43 +85,10 @@ class SafetySupervisor:
         self.params = validate(params)
         p = self.params
         self.sample_time_s = float(sample_time_s)
-        self._T_ns = round(sample_time_s * 1e9)
-        self._wd_ns = round(p.watchdog_ms * 1e6)
-        self._stuck_ns = round(p.stuck_ms * 1e6)
-        self._stall_ns = round(p.stall_ms * 1e6)
-        self._stall_c: int | None = None
-        self._stall_since = 0
-        half = p.stroke_m / 2.0
-        self._x_hi = half - p.stroke_margin_m  # soft-limit boundaries
-        self._x_lo = -self._x_hi
-        self._x_abs_max = half + p.position_margin_m
-        self._p_max = {
-            "p_c1": p.supply_linear_pa + p.pressure_margin_pa,
-            "p_c2": p.supply_linear_pa + p.pressure_margin_pa,
-            "p_m1": p.supply_rotary_pa + p.pressure_margin_pa,
-        }
-        self._live = {
-            "p_c1": p.pressure_live_v,
-            "p_c2": p.pressure_live_v,
-            "p_m1": p.pressure_live_v,
-            "x": p.laser_live_v,
-        }
-        self._u_toward_hi = 1.0 if p.extend_above_neutral else -1.0
-        n_vel = max(1, round(p.velocity_window_ms * 1e-3 / sample_time_s))
-        n_spd = max(1, round(p.speed_window_ms * 1e-3 / sample_time_s))
-        self._x_win: deque[tuple[int, float]] = deque(maxlen=n_vel + 1)
-        self._c_win: deque[tuple[int, int]] = deque(maxlen=n_spd + 1)
-        self._enc_prev: tuple[int, int, float | None] | None = (
-            None  # (counts, stamp, counts/period)
-        )
-        # per analog channel (_ANALOG order): last value and since when it holds it
-        self._frozen_v: list[float] = [math.nan] * len(_ANALOG)  # NaN: never equal, starts fresh
-        self._frozen_t: list[int] = [0] * len(_ANALOG)
-        self._x = math.nan
-        self._v = 0.0
-        self._have_sample = False
-        self._zone = {"hi": False, "lo": False}
-        self._last_cmd: dict[str, tuple[float, int] | None] = dict.fromkeys(AXES)
+        self._th = rules.thresholds(p, sample_time_s)
+        self._s = rules.STATE.new()
+        self._d = rules.FINDINGS.new()
+        # group -> the fault keys present, (axis, key) -> (message, values)
         self._groups: dict[str, dict[tuple[str, str], tuple[str, dict[str, Any]]]] = {}
         self._latched: dict[str, dict[str, str]] = {a: {} for a in AXES}
         self._estop: str | None = None
@@ -165,165 +126,138 @@ class SafetySupervisor:
         - encoder step deviating from the previous speed by > a·Δt²·cpr/2π + slack counts → rotary safe;
         - |speed| over ``speed_window_ms`` > ``max_speed_rpm`` → rotary safe.
         """
-        p = self.params
-        now = int(sample.stamp_ns)
-        self._now_ns = now
-        present: dict[tuple[str, str], tuple[str, dict[str, Any]]] = {}
-
-        def flag(sensor: str, rule: str, message: str, **values: Any) -> None:
-            # fault key "rule:sensor"; overspeed is not a sensor fault: key "overspeed"
-            key = rule if rule == "overspeed" else f"{rule}:{sensor}"
-            present[(SENSOR_AXIS[sensor], key)] = (message, {"sensor": sensor, **values})
-
         s = sample
-        if not math.isfinite(s.p_c1 + s.p_c2 + s.p_m1 + s.x + s.theta + s.omega):  # fast screen
-            for name, sensor in _FIELD_SENSOR.items():
-                v = getattr(sample, name)
-                if not math.isfinite(v):
-                    flag(sensor, "non_finite", f"{name} is {v}", value=v)
-        if raw_volts is not None and not self._volts_live(raw_volts):
-            for sensor, v in zip(_ANALOG, raw_volts):
-                lo, hi = self._live[sensor]
-                if not math.isfinite(v):
-                    flag(sensor, "non_finite", f"{sensor} voltage is {v}", volts=v)
-                elif v < lo or v > hi:
-                    flag(
-                        sensor,
-                        "live_range",
-                        f"{sensor} voltage {v:.4g} V outside its live range [{lo:g}, {hi:g}] V",
-                        volts=v,
-                        lo=lo,
-                        hi=hi,
-                    )
-        pm = self._p_max
-        if s.p_c1 > pm["p_c1"] or s.p_c2 > pm["p_c2"] or s.p_m1 > pm["p_m1"]:  # fast screen
-            for sensor, p_max in pm.items():
-                pv = getattr(sample, sensor)
-                if pv > p_max:
-                    flag(
-                        sensor,
-                        "over_pressure",
-                        f"{sensor} = {pv:.6g} Pa above supply + margin = {p_max:.6g} Pa",
-                        pressure_pa=pv,
-                        limit_pa=p_max,
-                    )
-        x = sample.x
-        if abs(x) > self._x_abs_max:
+        now = int(s.stamp_ns)
+        self._now_ns = now
+        # frozen analog values: the raw volts when given, else the SI value
+        values = raw_volts if raw_volts is not None else (s.p_c1, s.p_c2, s.p_m1, s.x)
+        keys = rules.non_finite_fields(self._d, s.p_c1, s.p_c2, s.p_m1, s.x, s.theta, s.omega)
+        keys |= rules.sample_faults(
+            self._th, self._s, self._d, now, s.p_c1, s.p_c2, s.p_m1, s.x, int(s.counts),
+            values, raw_volts is not None,
+        )  # fmt: skip
+        if keys or self._groups.get("sensor"):
+            present = self._sensor_faults(keys, s, values, raw_volts is not None, now)
+            self._update_group("sensor", present, now)
+        else:
+            self._groups.setdefault("sensor", {})  # the groups' order is the order they appear
+
+    def _sensor_faults(
+        self, keys: int, s: SensorSample, values: Any, have_volts: bool, now: int
+    ) -> dict[tuple[str, str], tuple[str, dict[str, Any]]]:
+        """The sensor fault keys ``keys`` with their messages, in the rules' order."""
+        present: dict[tuple[str, str], tuple[str, dict[str, Any]]] = {}
+        if not keys:
+            return present
+
+        def flag(bit: int, message: str, **kv: Any) -> None:
+            present[(KEY_AXIS[bit], SENSOR_KEYS[bit])] = (
+                message,
+                {"sensor": KEY_SENSOR[bit], **kv},
+            )
+
+        self._input_faults(flag, keys, s, values, have_volts)
+        self._range_faults(flag, keys, s, values, now)
+        self._encoder_faults(flag, keys, s, now)
+        return present
+
+    def _input_faults(self, flag: Any, keys: int, s: SensorSample, volts: Any, have: bool) -> None:
+        """Messages of the non-finite fields and of the voltages outside their live range."""
+        d, th = self._d, self._th
+        for i, name in enumerate(rules.FIELDS):
+            if d.nf_fields >> i & 1:
+                v = getattr(s, name)
+                flag(min(i, rules.NON_FINITE_ENCODER), f"{name} is {v}", value=v)
+        if not (have and (d.nf_volts or keys & _LIVE_KEYS)):
+            return
+        for i, sensor in enumerate(ANALOG):
+            v = volts[i]
+            lo, hi = (th.x_live_lo, th.x_live_hi) if i == 3 else (th.p_live_lo, th.p_live_hi)
+            if d.nf_volts >> i & 1:
+                flag(rules.NON_FINITE + i, f"{sensor} voltage is {v}", volts=v)
+            elif keys >> (rules.LIVE_RANGE + i) & 1:
+                flag(
+                    rules.LIVE_RANGE + i,
+                    f"{sensor} voltage {v:.4g} V outside its live range [{lo:g}, {hi:g}] V",
+                    volts=v,
+                    lo=lo,
+                    hi=hi,
+                )
+
+    def _range_faults(self, flag: Any, keys: int, s: SensorSample, values: Any, now: int) -> None:
+        """Messages of over-pressure, position, soft-limit trip and frozen values."""
+        th, st = self._th, self._s
+        p_max = (th.p_max_c1, th.p_max_c2, th.p_max_m1)
+        for i, sensor in enumerate(ANALOG[:3]):
+            if keys >> (rules.OVER_PRESSURE + i) & 1:
+                pv = getattr(s, sensor)
+                flag(
+                    rules.OVER_PRESSURE + i,
+                    f"{sensor} = {pv:.6g} Pa above supply + margin = {p_max[i]:.6g} Pa",
+                    pressure_pa=pv,
+                    limit_pa=p_max[i],
+                )
+        x = s.x
+        if keys >> rules.POSITION_RANGE & 1:
             flag(
-                "x",
-                "position_range",
-                f"x = {x:.4g} m beyond the end stops (|x| ≤ {self._x_abs_max:g} m)",
+                rules.POSITION_RANGE,
+                f"x = {x:.4g} m beyond the end stops (|x| ≤ {th.x_abs_max:g} m)",
                 x_m=x,
             )
-        elif x >= self._x_hi or x <= self._x_lo:
+        elif keys >> rules.STROKE_LIMIT & 1:
             # the hold did not stop the piston (see the module docstring): trip, latched
             flag(
-                "x",
-                "stroke_limit",
+                rules.STROKE_LIMIT,
                 f"piston at x = {x * 1e3:.4g} mm, at or beyond the soft limit "
-                f"±{self._x_hi * 1e3:g} mm",
+                f"±{th.x_hi * 1e3:g} mm",
                 x_m=x,
-                limit_m=self._x_hi if x > 0 else self._x_lo,
+                limit_m=th.x_hi if x > 0 else th.x_lo,
             )
-        # frozen analog values: the raw volts when given, else the SI value
-        values = raw_volts if raw_volts is not None else (sample.p_c1, sample.p_c2, sample.p_m1, x)
-        fv, ft, stuck_ns = self._frozen_v, self._frozen_t, self._stuck_ns
-        for i, v in enumerate(values):
-            if v != fv[i]:
-                fv[i], ft[i] = v, now
-            elif now - ft[i] > stuck_ns:
-                sensor = _ANALOG[i]
+        for i, sensor in enumerate(ANALOG):
+            if keys >> (rules.STUCK + i) & 1:
+                v, frozen_ms = values[i], (now - st.frozen_t[i]) * 1e-6
                 flag(
-                    sensor,
-                    "stuck",
-                    f"{sensor} frozen at {v:.6g} for {(now - ft[i]) * 1e-6:.4g} ms (> {p.stuck_ms:g} ms)",
+                    rules.STUCK + i,
+                    f"{sensor} frozen at {v:.6g} for {frozen_ms:.4g} ms (> {self.params.stuck_ms:g} ms)",
                     value=v,
-                    frozen_ms=(now - ft[i]) * 1e-6,
+                    frozen_ms=frozen_ms,
                 )
-        # piston velocity over the window (for the braking distance)
-        if math.isfinite(x):
-            self._x_win.append((now, x))
-            t0, x0 = self._x_win[0]
-            self._v = (x - x0) / ((now - t0) * 1e-9) if now > t0 else 0.0
-            self._x = x
-        else:
-            self._x = math.nan
-        self._check_encoder(int(sample.counts), now, flag)
-        self._check_stall(int(sample.counts), sample.p_m1, now, flag)
-        self._have_sample = True
-        self._update_group("sensor", present, now)
 
-    def _check_stall(self, c: int, p_m1: float, now: int, flag: Any) -> None:
-        """Dead encoder / blocked rotor: inlet able to turn the motor, yet no count for stall_ms.
-
-        Catches what the jump rule cannot: an encoder that stops counting at low
-        speed (a missed count there is within the jump allowance).
-        """
-        if not p_m1 > self.params.stall_inlet_pa or c != self._stall_c:
-            self._stall_c, self._stall_since = c, now
-            return
-        if now - self._stall_since > self._stall_ns:
+    def _encoder_faults(self, flag: Any, keys: int, s: SensorSample, now: int) -> None:
+        """Messages of the encoder jump, overspeed and no-rotation rules."""
+        d, p = self._d, self.params
+        if keys >> rules.ENCODER_JUMP & 1:
             flag(
-                "encoder",
-                "no_rotation",
-                f"no encoder count for {(now - self._stall_since) * 1e-6:.4g} ms with the motor "
-                f"inlet at {p_m1:.6g} Pa (> {self.params.stall_inlet_pa:g} Pa)",
-                inlet_pa=p_m1,
-                still_ms=(now - self._stall_since) * 1e-6,
+                rules.ENCODER_JUMP,
+                f"encoder stepped {d.jump_counts} counts where the previous speed predicts "
+                f"{d.jump_predicted:.4g} ± {d.jump_allowed:.4g}",
+                step_counts=d.jump_counts,
+                deviation_counts=d.jump_deviation,
+                allowed_counts=d.jump_allowed,
             )
-
-    def _volts_live(self, raw_volts: tuple[float, ...]) -> bool:
-        """Fast screen: all four voltages finite and inside their live ranges (NaN fails)."""
-        plo, phi = self.params.pressure_live_v
-        llo, lhi = self.params.laser_live_v
-        v0, v1, v2, v3 = raw_volts
-        return plo <= v0 <= phi and plo <= v1 <= phi and plo <= v2 <= phi and llo <= v3 <= lhi
-
-    def _check_encoder(self, c: int, now: int, flag: Any) -> None:
-        p = self.params
-        prev = self._enc_prev
-        rate = None
-        if prev is not None and now > prev[1]:
-            c0, t0, rate0 = prev
-            m = (now - t0) / self._T_ns  # periods since the previous sample
-            dc = c - c0
-            if rate0 is not None:
-                allowed = self.encoder_jump_allowance(now - t0)
-                deviation = abs(dc - rate0 * m)
-                if deviation > allowed:
-                    flag(
-                        "encoder",
-                        "encoder_jump",
-                        f"encoder stepped {dc} counts where the previous speed predicts {rate0 * m:.4g} ± {allowed:.4g}",
-                        step_counts=dc,
-                        deviation_counts=deviation,
-                        allowed_counts=allowed,
-                    )
-            rate = dc / m
-        self._enc_prev = (c, now, rate)
-        self._c_win.append((now, c))
-        t0, c0 = self._c_win[0]
-        if now > t0:
-            rpm = (c - c0) * 60.0e9 / (p.counts_per_rev * (now - t0))
-            if abs(rpm) > p.max_speed_rpm:
-                flag(
-                    "encoder",
-                    "overspeed",
-                    f"motor speed {rpm:.5g} rpm above max_speed_rpm = {p.max_speed_rpm:g}",
-                    speed_rpm=rpm,
-                    max_speed_rpm=p.max_speed_rpm,
-                )
+        if keys >> rules.OVERSPEED & 1:
+            flag(
+                rules.OVERSPEED,
+                f"motor speed {d.speed_rpm:.5g} rpm above max_speed_rpm = {p.max_speed_rpm:g}",
+                speed_rpm=d.speed_rpm,
+                max_speed_rpm=p.max_speed_rpm,
+            )
+        if keys >> rules.NO_ROTATION & 1:
+            still_ms = (now - self._s.stall_since) * 1e-6
+            flag(
+                rules.NO_ROTATION,
+                f"no encoder count for {still_ms:.4g} ms with the motor "
+                f"inlet at {s.p_m1:.6g} Pa (> {p.stall_inlet_pa:g} Pa)",
+                inlet_pa=s.p_m1,
+                still_ms=still_ms,
+            )
 
     def encoder_jump_allowance(self, dt_ns: int) -> float:
         """Largest plausible deviation [counts] of an encoder step over ``dt_ns`` from the previous speed.
 
         a_max · Δt² · cpr / 2π (the angle a full acceleration adds) + the quantisation slack.
         """
-        p = self.params
-        dt_s = dt_ns * 1e-9
-        return (
-            p.max_accel_rad_s2 * dt_s * dt_s * p.counts_per_rev / _TWO_PI + p.encoder_slack_counts
-        )
+        return rules.jump_allowance(self._th, dt_ns)
 
     def command(self, axis: str, u: float, stamp_ns: int) -> None:
         """A controller's command for ``axis`` arrived, answering the sample stamped ``stamp_ns``.
@@ -331,81 +265,64 @@ class SafetySupervisor:
         NaN/inf or outside [0, 10] V: refused (never written), the axis goes safe
         (latched ``output_sanity``). An older stamp than the last accepted one is ignored.
         """
-        if axis not in self._last_cmd:
+        a = _AXIS_INDEX.get(axis)
+        if a is None:
             raise ValueError(f"axis: {axis!r} refused; allowed: one of {', '.join(AXES)}")
+        done = rules.command(self._s, a, float(u), int(stamp_ns))
         group = _SANITY_GROUP[axis]
-        if not (U_MIN_V <= u <= U_MAX_V):  # NaN fails every comparison; ±inf is out of range
+        if done & rules.CMD_REFUSED:
             self.counters["refused_commands"] += 1
             msg = f"{axis} command {u!r} V refused (allowed [{U_MIN_V:g}, {U_MAX_V:g}] V, finite)"
             self._update_group(
                 group, {(axis, "output_sanity"): (msg, {"command_v": u})}, self._now_ns
             )
             return
-        if self._groups.get(group):  # a refused command was pending: clear it
+        if done & rules.CMD_REFUSAL_GONE:
             self._update_group(group, {}, self._now_ns)
-        last = self._last_cmd[axis]
-        if last is not None and stamp_ns < last[1]:
+        if done & rules.CMD_STALE:
             self.counters["stale_commands"] += 1
             return
-        if last is None:
+        if done & rules.CMD_FIRST:
             self._emit(axis, "command", OK, f"{axis} commands arriving", {"command_v": u})
-        self._last_cmd[axis] = (float(u), int(stamp_ns))
 
     # ----------------------------------------------------------------- outputs
     def outputs(self, now_ns: int) -> tuple[float, float]:
         """The voltages (linear, rotary) to write for the tick at ``now_ns``, after every rule."""
         now = int(now_ns)
         self._now_ns = now
-        present = {}
-        for axis, last in self._last_cmd.items():
-            if last is not None and now - last[1] > self._wd_ns:
-                age_ms = (now - last[1]) * 1e-6
-                present[(axis, "watchdog")] = (
-                    f"no fresh {axis} command for {age_ms:.4g} ms (> watchdog_ms = {self.params.watchdog_ms:g})",
-                    {"age_ms": age_ms},
-                )
-        self._update_group("watchdog", present, now)
-        self._update_zone(now)
-        out = []
-        for axis in AXES:
-            last = self._last_cmd[axis]
-            if (
-                self._estop is not None
-                or self._latched[axis]
-                or last is None
-                or not self._have_sample
-            ):
-                out.append(SAFE_V)
-                continue
-            u = last[0]
-            if axis == "linear":
-                push = (u - SAFE_V) * self._u_toward_hi  # > 0: drives toward +x
-                if (self._zone["hi"] and push > 0.0) or (self._zone["lo"] and push < 0.0):
-                    u = SAFE_V
-            out.append(u)
-        return out[0], out[1]
+        th, st = self._th, self._s
+        late = rules.watchdog_faults(th, st, now)
+        if late or self._groups.get("watchdog"):
+            present = {}
+            for a, axis in enumerate(AXES):
+                if late >> a & 1:
+                    age_ms = (now - st.cmd_t[a]) * 1e-6
+                    present[(axis, "watchdog")] = (
+                        f"no fresh {axis} command for {age_ms:.4g} ms (> watchdog_ms = {self.params.watchdog_ms:g})",
+                        {"age_ms": age_ms},
+                    )
+            self._update_group("watchdog", present, now)
+        else:
+            self._groups.setdefault("watchdog", {})
+        changed = rules.update_zone(th, st, self._d)
+        if changed:
+            self._zone_events(changed, now)
+        estop = self._estop is not None
+        return (
+            rules.output_v(th, st, 0, estop or bool(self._latched[AXES[0]])),
+            rules.output_v(th, st, 1, estop or bool(self._latched[AXES[1]])),
+        )
 
-    def _update_zone(self, now: int) -> None:
-        """Stroke soft limits with the braking distance v²/(2·a) (not latched, with hysteresis)."""
-        p = self.params
-        x, v = self._x, self._v
-        if not math.isfinite(x):
-            return  # the sensor rules have made the linear axis safe
-        d_brake = v * v / (2.0 * p.max_decel_m_s2)
-        reach_hi = x + (d_brake if v > 0.0 else 0.0)
-        reach_lo = x - (d_brake if v < 0.0 else 0.0)
-        zone = self._zone
-        if not (zone["hi"] or zone["lo"]) and self._x_lo < reach_lo and reach_hi < self._x_hi:
-            return  # hot path: far from both limits, nothing to change
-        for side, inside, leave in (
-            ("hi", reach_hi >= self._x_hi, reach_hi < self._x_hi - p.stroke_hyst_m),
-            ("lo", reach_lo <= self._x_lo, reach_lo > self._x_lo + p.stroke_hyst_m),
+    def _zone_events(self, changed: int, now: int) -> None:
+        """The soft-limit transitions :func:`rules.update_zone` reported, as events."""
+        th, st = self._th, self._s
+        x, v, d_brake = st.x, st.v, self._d.braking_m
+        for bound, entered, left, direction in (
+            (th.x_hi, rules.ZONE_HI_ENTERED, rules.ZONE_HI_LEFT, "extending (+x)"),
+            (th.x_lo, rules.ZONE_LO_ENTERED, rules.ZONE_LO_LEFT, "retracting (-x)"),
         ):
-            bound = self._x_hi if side == "hi" else self._x_lo
             values = {"x_m": x, "v_m_s": v, "braking_m": d_brake, "limit_m": bound}
-            if not self._zone[side] and inside:
-                self._zone[side] = True
-                direction = "extending (+x)" if side == "hi" else "retracting (-x)"
+            if changed & entered:
                 self._emit(
                     "linear",
                     "soft_limit",
@@ -414,8 +331,7 @@ class SafetySupervisor:
                     values,
                     now,
                 )
-            elif self._zone[side] and leave:
-                self._zone[side] = False
+            elif changed & left:
                 self._emit(
                     "linear", "soft_limit", OK, f"soft limit released at x = {x:.4g} m", values, now
                 )
@@ -482,7 +398,7 @@ class SafetySupervisor:
         wd = self._groups.get("watchdog", {})
         if (axis, "watchdog") in wd:
             del wd[(axis, "watchdog")]
-            self._last_cmd[axis] = None  # wait for commands to resume
+            self._s.cmd_have[_AXIS_INDEX[axis]] = 0  # wait for commands to resume
         cleared = list(self._latched[axis])
         self._latched[axis].clear()
         return cleared
@@ -504,12 +420,12 @@ class SafetySupervisor:
             if self._estop is not None:
                 causes.append("estop")
             causes.extend(self._latched[axis])
-            if self._last_cmd[axis] is None:
+            if not self._s.cmd_have[_AXIS_INDEX[axis]]:
                 causes.append("no_command")
-            if not self._have_sample:
+            if not self._s.have_sample:
                 causes.append("no_sample")
             present = tuple(key for g in self._groups.values() for (a, key) in g if a == axis)
-            limited = axis == "linear" and (self._zone["hi"] or self._zone["lo"])
+            limited = axis == "linear" and bool(self._s.zone_hi or self._s.zone_lo)
             state = "SAFE" if causes else ("LIMITED" if limited else "OK")
             out[axis] = AxisStatus(axis, state, tuple(causes), present)
         return out
@@ -517,23 +433,31 @@ class SafetySupervisor:
     def thresholds(self) -> dict[str, Any]:
         """What the rules compare against, derived once from :attr:`params` (SI; stamps int ns).
 
-        For mirrors of these rules (``pneu_control.fastloop``, the compiled closed loop):
-        the same numbers, not a second derivation of them.
+        The fields of :attr:`threshold_record` (:func:`rules.thresholds`), grouped per sensor.
         """
+        th = self._th
         return {
-            "T_ns": self._T_ns,
-            "watchdog_ns": self._wd_ns,
-            "stuck_ns": self._stuck_ns,
-            "stall_ns": self._stall_ns,
-            "x_hi": self._x_hi,
-            "x_lo": self._x_lo,
-            "x_abs_max": self._x_abs_max,
-            "p_max": dict(self._p_max),
-            "live_v": dict(self._live),
-            "u_toward_hi": self._u_toward_hi,
-            "velocity_window": self._x_win.maxlen,
-            "speed_window": self._c_win.maxlen,
+            "T_ns": th.T_ns,
+            "watchdog_ns": th.watchdog_ns,
+            "stuck_ns": th.stuck_ns,
+            "stall_ns": th.stall_ns,
+            "x_hi": th.x_hi,
+            "x_lo": th.x_lo,
+            "x_abs_max": th.x_abs_max,
+            "p_max": {"p_c1": th.p_max_c1, "p_c2": th.p_max_c2, "p_m1": th.p_max_m1},
+            "live_v": {
+                **dict.fromkeys(ANALOG[:3], (th.p_live_lo, th.p_live_hi)),
+                "x": (th.x_live_lo, th.x_live_hi),
+            },
+            "u_toward_hi": th.u_toward_hi,
+            "velocity_window": th.n_xw,
+            "speed_window": th.n_cw,
         }
+
+    @property
+    def threshold_record(self) -> Any:
+        """The :data:`rules.THRESHOLDS` record the rules read (do not modify)."""
+        return self._th
 
     @property
     def tripped(self) -> bool:
@@ -548,7 +472,7 @@ class SafetySupervisor:
     @property
     def soft_limits(self) -> tuple[float, float]:
         """(x_lo, x_hi) [m]: the soft-limit boundaries inside the end stops."""
-        return self._x_lo, self._x_hi
+        return self._th.x_lo, self._th.x_hi
 
     # ----------------------------------------------------------------- internal
     def _update_group(

@@ -20,8 +20,8 @@ avoids the two constructs LLVM rewrites -- a constant ``x ** 2`` becomes ``x * x
 so a squared term reads its exponent from a field).
 
 Field kinds: ``"f"`` float64 (default NaN), ``"i"`` int64 (default 0; booleans and
-option codes), ``("f", n)`` a fixed-length float64 array (default zeros; a Python
-list in the Python record); a third element sets the Python record's default.
+option codes), ``("f", n)`` / ``("i", n)`` a fixed-length float64 / int64 array (default
+zeros; a Python list in the Python record); a third element sets the Python record's default.
 
 Without numba (a rig PC may run the driver without it) :func:`kernel` leaves the
 function as it is: everything runs in Python.
@@ -48,7 +48,7 @@ __all__ = ["JIT", "Record", "RecordType", "kernel"]
 # (nothing inside allocates an array; the caller allocates)
 JIT = {"error_model": "numpy", "_nrt": False}
 
-FieldSpec = tuple  # (name, "f" | "i" | ("f", n)[, default])
+FieldSpec = tuple  # (name, "f" | "i" | ("f", n) | ("i", n)[, default])
 
 
 def kernel(fn: Callable) -> Callable:
@@ -88,7 +88,7 @@ class Record:
         for name, kind in self.TYPE.fields:
             v = src[name]
             if isinstance(kind, tuple):
-                setattr(self, name, [float(x) for x in v])
+                setattr(self, name, [float(x) if kind[0] == "f" else int(x) for x in v])
             elif kind == "f":
                 setattr(self, name, float(v))
             else:
@@ -139,17 +139,17 @@ class RecordType:
 
 def _default(kind: Any) -> Any:
     if isinstance(kind, tuple):
-        return [0.0] * kind[1]
+        return [0.0 if kind[0] == "f" else 0] * kind[1]
     return math.nan if kind == "f" else 0
 
 
 def _np_kind(kind: Any) -> Any:
     if isinstance(kind, tuple):
-        if kind[0] != "f" or not (isinstance(kind[1], int) and kind[1] > 0):
-            raise ValueError(f"array field kind {kind!r}; allowed: ('f', n > 0)")
-        return (np.float64, (kind[1],))
+        if kind[0] not in ("f", "i") or not (isinstance(kind[1], int) and kind[1] > 0):
+            raise ValueError(f"array field kind {kind!r}; allowed: ('f', n > 0), ('i', n > 0)")
+        return (np.float64 if kind[0] == "f" else np.int64, (kind[1],))
     if kind == "f":
         return np.float64
     if kind == "i":
         return np.int64
-    raise ValueError(f"field kind {kind!r}; allowed: 'f', 'i', ('f', n)")
+    raise ValueError(f"field kind {kind!r}; allowed: 'f', 'i', ('f', n), ('i', n)")

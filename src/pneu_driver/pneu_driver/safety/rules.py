@@ -1,0 +1,519 @@
+"""The safety supervisor's decision rules, written once, as kernels on records.
+
+Every comparison of a sample or a command against a threshold is here, as a
+:func:`~pneu_msgs_py.params.records.kernel` (plain Python from Python, compiled
+into numba callers) on three records:
+
+- ``th``, :data:`THRESHOLDS`: what the rules compare against, derived once from
+  :class:`~pneu_driver.safety.params.SafetyParams` (:func:`thresholds`);
+- ``s``, :data:`STATE`: what the rules remember (the velocity and speed windows,
+  the last encoder step, the frozen values and since when, the stall clock, the
+  soft-limit zones, the last command per axis, the pending refusals);
+- ``d``, :data:`FINDINGS`: the numbers behind a rule that fired this call (for
+  the message), written only when it fires (``nf_fields``/``nf_volts`` always).
+
+A rule returns a decision, never a message: the fault keys present as a bit mask
+(:data:`SENSOR_KEYS`; bit ``a`` = axis ``a`` for the watchdog), or a code of what
+changed (:func:`update_zone`, :func:`command`). Two callers, one source:
+:class:`~pneu_driver.safety.supervisor.SafetySupervisor` (events, messages,
+latches, acknowledge) and the compiled closed loop's adapter
+(:mod:`pneu_control.fastloop.supervisor`: latches as bits, the event flag).
+
+Axes are indices here: 0 linear, 1 rotary (``AXES`` order). Stamps are int ns.
+Each rule is "> threshold": a value exactly at it passes (``>=`` for the soft limit).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from pneu_msgs_py.contract.samples import AXES, U_MAX_V, U_MIN_V
+from pneu_msgs_py.params.records import Record, RecordType, kernel
+
+from pneu_driver.safety.events import SAFE_V, SENSOR_AXIS
+
+__all__ = [
+    "ANALOG",
+    "FIELDS",
+    "FINDINGS",
+    "SENSOR_KEYS",
+    "STATE",
+    "THRESHOLDS",
+    "WINDOW_MAX",
+    "command",
+    "fresh_array",
+    "jump_allowance",
+    "non_finite_fields",
+    "output_v",
+    "sample_faults",
+    "sensor_key_axes",
+    "thresholds",
+    "update_zone",
+    "watchdog_faults",
+]
+
+# longest velocity / speed window in sample periods (the rings hold WINDOW_MAX + 1
+# samples): every window SafetyParams allows (≤ 1000 ms) at 1 ms, the default 10 ms
+# down to the shortest sim period (1e-5 s)
+WINDOW_MAX = 1000
+_W = WINDOW_MAX + 1
+_TWO_PI = 2.0 * math.pi
+
+ANALOG = ("p_c1", "p_c2", "p_m1", "x")  # the analog channels (raw volts order; laser = x)
+FIELDS = ("p_c1", "p_c2", "p_m1", "x", "theta", "omega")  # sample fields checked finite
+FIELD_SENSOR = ("p_c1", "p_c2", "p_m1", "x", "encoder", "encoder")
+
+# ------------------------------------------------------------ sensor fault keys, one bit each
+NON_FINITE = 0  # non_finite:<p_c1|p_c2|p_m1|x>, bits 0..3; non_finite:encoder, bit 4
+NON_FINITE_ENCODER = 4
+LIVE_RANGE = 5  # live_range:<analog>, bits 5..8
+OVER_PRESSURE = 9  # over_pressure:<p_c1|p_c2|p_m1>, bits 9..11
+POSITION_RANGE = 12  # position_range:x
+STROKE_LIMIT = 13  # stroke_limit:x (the piston at or beyond a soft limit)
+STUCK = 14  # stuck:<analog>, bits 14..17
+ENCODER_JUMP = 18  # encoder_jump:encoder
+OVERSPEED = 19  # overspeed (not a sensor fault: no sensor in its key)
+NO_ROTATION = 20  # no_rotation:encoder
+SENSOR_KEYS = (
+    *(f"non_finite:{s}" for s in (*ANALOG, "encoder")),
+    *(f"live_range:{s}" for s in ANALOG),
+    *(f"over_pressure:{s}" for s in ANALOG[:3]),
+    "position_range:x",
+    "stroke_limit:x",
+    *(f"stuck:{s}" for s in ANALOG),
+    "encoder_jump:encoder",
+    "overspeed",
+    "no_rotation:encoder",
+)
+KEY_SENSOR = tuple(k.split(":")[1] if ":" in k else "encoder" for k in SENSOR_KEYS)
+KEY_AXIS = tuple(SENSOR_AXIS[s] for s in KEY_SENSOR)
+LINEAR_KEYS = sum(1 << i for i, a in enumerate(KEY_AXIS) if a == AXES[0])
+ROTARY_KEYS = sum(1 << i for i, a in enumerate(KEY_AXIS) if a == AXES[1])
+
+# what update_zone changed
+ZONE_HI_ENTERED, ZONE_HI_LEFT, ZONE_LO_ENTERED, ZONE_LO_LEFT = 1, 2, 4, 8
+# what command did
+CMD_REFUSED = 1  # outside [U_MIN_V, U_MAX_V] or NaN: not taken, output_sanity present
+CMD_REFUSAL_GONE = 2  # a good command after a refused one: output_sanity gone
+CMD_STALE = 4  # older than the last accepted one: ignored
+CMD_FIRST = 8  # the axis's first accepted command (or the first after an acknowledge)
+
+# ------------------------------------------------------------------ records
+THRESHOLDS = RecordType(
+    "SafetyThresholds",
+    [
+        ("T_ns", "i"),  # sample period
+        ("watchdog_ns", "i"),
+        ("stuck_ns", "i"),
+        ("stall_ns", "i"),
+        ("x_hi", "f"),  # soft limits [m]
+        ("x_lo", "f"),
+        ("x_abs_max", "f"),  # |x| beyond this is implausible [m]
+        ("p_max_c1", "f"),  # supply + margin [Pa]
+        ("p_max_c2", "f"),
+        ("p_max_m1", "f"),
+        ("p_live_lo", "f"),  # pressure sensors' live range [V]
+        ("p_live_hi", "f"),
+        ("x_live_lo", "f"),  # laser's live range [V]
+        ("x_live_hi", "f"),
+        ("u_toward_hi", "f"),  # +1: above SAFE_V drives toward +x
+        ("max_decel_m_s2", "f"),
+        ("stroke_hyst_m", "f"),
+        ("max_speed_rpm", "f"),
+        ("max_accel_rad_s2", "f"),
+        ("counts_per_rev", "i"),
+        ("encoder_slack_counts", "i"),
+        ("stall_inlet_pa", "f"),
+        ("n_xw", "i"),  # velocity window: samples held (periods + 1)
+        ("n_cw", "i"),  # speed window: samples held
+    ],
+)
+STATE = RecordType(
+    "SafetyRuleState",
+    [
+        ("have_sample", "i"),
+        ("x", "f"),  # last finite position (NaN after a non-finite one) [m]
+        ("v", "f", 0.0),  # piston velocity over the window [m/s]
+        ("xw_t", ("i", _W)),  # velocity window ring: stamps, positions
+        ("xw_x", ("f", _W)),
+        ("xw_head", "i"),
+        ("xw_n", "i"),
+        ("cw_t", ("i", _W)),  # speed window ring: stamps, counts
+        ("cw_c", ("i", _W)),
+        ("cw_head", "i"),
+        ("cw_n", "i"),
+        ("enc_have", "i"),  # previous encoder sample: counts, stamp, counts/period
+        ("enc_c", "i"),
+        ("enc_t", "i"),
+        ("enc_has_rate", "i"),
+        ("enc_rate", "f", 0.0),
+        ("frozen_v", ("f", 4), [math.nan] * 4),  # per analog channel: last value (NaN: fresh)
+        ("frozen_t", ("i", 4)),  # and since when it holds it
+        ("stall_have", "i"),  # counts seen with the inlet high, and since when
+        ("stall_c", "i"),
+        ("stall_since", "i"),
+        ("zone_hi", "i"),  # soft-limit hold active
+        ("zone_lo", "i"),
+        ("cmd_have", ("i", 2)),  # per axis: a command accepted (0 after acknowledging a watchdog)
+        ("cmd_u", ("f", 2)),
+        ("cmd_t", ("i", 2)),
+        ("refused", "i"),  # bit a: axis a's last command was refused (output_sanity present)
+    ],
+)
+FINDINGS = RecordType(
+    "SafetyFindings",
+    [
+        ("nf_fields", "i"),  # bit i: FIELDS[i] not finite (written on every call)
+        ("nf_volts", "i"),  # bit i: voltage i not finite (written on every call with volts)
+        ("jump_counts", "i"),  # encoder_jump: the step, what the speed predicts, ± allowed
+        ("jump_predicted", "f"),
+        ("jump_deviation", "f"),
+        ("jump_allowed", "f"),
+        ("speed_rpm", "f"),  # overspeed
+        ("braking_m", "f"),  # update_zone: v²/(2a)
+    ],
+)
+
+
+def thresholds(params: Any, sample_time_s: float) -> Record:
+    """The :data:`THRESHOLDS` record of validated ``params`` at ``sample_time_s`` [s] (> 0)."""
+    p = params
+    half = p.stroke_m / 2.0
+    x_hi = half - p.stroke_margin_m
+    windows = []
+    for name in ("velocity_window_ms", "speed_window_ms"):
+        ms = getattr(p, name)
+        n = max(1, round(ms * 1e-3 / sample_time_s))
+        if n > WINDOW_MAX:
+            raise ValueError(
+                f"{name}: {ms!r} refused; allowed: (0, {WINDOW_MAX * sample_time_s * 1e3:g}] ms "
+                f"(at most {WINDOW_MAX} sample periods of {sample_time_s!r} s)"
+            )
+        windows.append(n + 1)
+    lin = p.supply_linear_pa + p.pressure_margin_pa
+    return THRESHOLDS.new(
+        T_ns=round(sample_time_s * 1e9),
+        watchdog_ns=round(p.watchdog_ms * 1e6),
+        stuck_ns=round(p.stuck_ms * 1e6),
+        stall_ns=round(p.stall_ms * 1e6),
+        x_hi=x_hi,
+        x_lo=-x_hi,
+        x_abs_max=half + p.position_margin_m,
+        p_max_c1=lin,
+        p_max_c2=lin,
+        p_max_m1=p.supply_rotary_pa + p.pressure_margin_pa,
+        p_live_lo=p.pressure_live_v[0],
+        p_live_hi=p.pressure_live_v[1],
+        x_live_lo=p.laser_live_v[0],
+        x_live_hi=p.laser_live_v[1],
+        u_toward_hi=1.0 if p.extend_above_neutral else -1.0,
+        max_decel_m_s2=p.max_decel_m_s2,
+        stroke_hyst_m=p.stroke_hyst_m,
+        max_speed_rpm=p.max_speed_rpm,
+        max_accel_rad_s2=p.max_accel_rad_s2,
+        counts_per_rev=p.counts_per_rev,
+        encoder_slack_counts=p.encoder_slack_counts,
+        stall_inlet_pa=p.stall_inlet_pa,
+        n_xw=windows[0],
+        n_cw=windows[1],
+    )
+
+
+def fresh_array(rt: RecordType) -> np.ndarray:
+    """One record of ``rt`` as a structured array (for numba), every field at its default."""
+    arr = rt.array(1)
+    for name, kind, default in rt.defaults:
+        if isinstance(kind, tuple):
+            if any(default):
+                arr[0][name][: len(default)] = default
+        elif default != 0:  # NaN included
+            arr[0][name] = default
+    return arr
+
+
+# ------------------------------------------------------------------ sample rules
+@kernel
+def non_finite_fields(d, p_c1, p_c2, p_m1, x, theta, omega):
+    """NaN/inf sample fields: their ``non_finite`` keys; ``d.nf_fields`` which ones."""
+    d.nf_fields = 0
+    if math.isfinite(p_c1 + p_c2 + p_m1 + x + theta + omega):  # fast screen
+        return 0
+    bits = 0
+    if not math.isfinite(p_c1):
+        bits |= 1
+    if not math.isfinite(p_c2):
+        bits |= 2
+    if not math.isfinite(p_m1):
+        bits |= 4
+    if not math.isfinite(x):
+        bits |= 8
+    if not math.isfinite(theta):
+        bits |= 16
+    if not math.isfinite(omega):
+        bits |= 32
+    d.nf_fields = bits
+    return (bits & 15) << NON_FINITE | (1 << NON_FINITE_ENCODER if bits & 48 else 0)
+
+
+@kernel
+def _voltage_fault(v, lo, hi, i):
+    """Channel i's voltage: non-finite, outside [lo, hi] (its keys), or live (0)."""
+    if not math.isfinite(v):
+        return 1 << (NON_FINITE + i)
+    if v < lo or v > hi:
+        return 1 << (LIVE_RANGE + i)
+    return 0
+
+
+@kernel
+def voltage_faults(th, d, volts):
+    """Raw volts (p_c1, p_c2, p_m1, laser) outside their sensors' live ranges, or non-finite."""
+    d.nf_volts = 0
+    plo = th.p_live_lo
+    phi = th.p_live_hi
+    v0 = volts[0]
+    v1 = volts[1]
+    v2 = volts[2]
+    v3 = volts[3]
+    if plo <= v0 <= phi and plo <= v1 <= phi and plo <= v2 <= phi:  # fast screen (NaN fails)
+        if th.x_live_lo <= v3 <= th.x_live_hi:
+            return 0
+    keys = _voltage_fault(v0, plo, phi, 0)
+    keys |= _voltage_fault(v1, plo, phi, 1)
+    keys |= _voltage_fault(v2, plo, phi, 2)
+    keys |= _voltage_fault(v3, th.x_live_lo, th.x_live_hi, 3)
+    d.nf_volts = (keys >> NON_FINITE) & 15
+    return keys
+
+
+@kernel
+def pressure_faults(th, p_c1, p_c2, p_m1):
+    """A pressure above its supply + margin."""
+    keys = 0
+    if p_c1 > th.p_max_c1:
+        keys |= 1 << OVER_PRESSURE
+    if p_c2 > th.p_max_c2:
+        keys |= 1 << (OVER_PRESSURE + 1)
+    if p_m1 > th.p_max_m1:
+        keys |= 1 << (OVER_PRESSURE + 2)
+    return keys
+
+
+@kernel
+def position_faults(th, x):
+    """|x| beyond the end stops + margin; else the piston at or beyond a soft limit (the hold
+    did not stop it: the trapped air can push it on, see the supervisor's docstring)."""
+    if abs(x) > th.x_abs_max:
+        return 1 << POSITION_RANGE
+    if x >= th.x_hi or x <= th.x_lo:
+        return 1 << STROKE_LIMIT
+    return 0
+
+
+@kernel
+def frozen_faults(th, s, now, values):
+    """An analog value (``values``: the raw volts, else the SI values) bit-identical for
+    longer than ``stuck_ns``."""
+    keys = 0
+    for i in range(4):
+        v = values[i]
+        if v != s.frozen_v[i]:
+            s.frozen_v[i] = v
+            s.frozen_t[i] = now
+        elif now - s.frozen_t[i] > th.stuck_ns:
+            keys |= 1 << (STUCK + i)
+    return keys
+
+
+@kernel
+def _ring(head, n, size):
+    """``deque(maxlen=size).append`` on a ring: (slot to write, next head, count, oldest slot)."""
+    nxt = head + 1
+    if nxt == size:
+        nxt = 0
+    if n < size:
+        n += 1
+    return head, nxt, n, (nxt if n == size else 0)
+
+
+@kernel
+def track_velocity(th, s, now, x):
+    """Piston velocity over the velocity window (for the braking distance); NaN x: unknown."""
+    if not math.isfinite(x):
+        s.x = math.nan
+        return
+    j, s.xw_head, s.xw_n, o = _ring(s.xw_head, s.xw_n, th.n_xw)
+    s.xw_t[j] = now
+    s.xw_x[j] = x
+    t0 = s.xw_t[o]
+    s.v = (x - s.xw_x[o]) / ((now - t0) * 1e-9) if now > t0 else 0.0
+    s.x = x
+
+
+@kernel
+def jump_allowance(th, dt_ns):
+    """Largest plausible deviation [counts] of an encoder step over ``dt_ns`` from the previous
+    speed: a_max · Δt² · cpr / 2π (the angle a full acceleration adds) + the quantisation slack."""
+    dt_s = dt_ns * 1e-9
+    return th.max_accel_rad_s2 * dt_s * dt_s * th.counts_per_rev / _TWO_PI + th.encoder_slack_counts
+
+
+@kernel
+def encoder_faults(th, s, d, now, c):
+    """A count step deviating from the previous speed by more than :func:`jump_allowance`;
+    |speed| over the speed window above ``max_speed_rpm``."""
+    keys = 0
+    has_rate = 0
+    rate = 0.0
+    if s.enc_have and now > s.enc_t:
+        t0 = s.enc_t
+        m = (now - t0) / th.T_ns  # periods since the previous sample
+        dc = c - s.enc_c
+        if s.enc_has_rate:
+            allowed = jump_allowance(th, now - t0)
+            predicted = s.enc_rate * m
+            deviation = abs(dc - predicted)
+            if deviation > allowed:
+                keys |= 1 << ENCODER_JUMP
+                d.jump_counts = dc
+                d.jump_predicted = predicted
+                d.jump_deviation = deviation
+                d.jump_allowed = allowed
+        rate = dc / m
+        has_rate = 1
+    s.enc_have = 1
+    s.enc_c = c
+    s.enc_t = now
+    s.enc_has_rate = has_rate
+    s.enc_rate = rate
+    j, s.cw_head, s.cw_n, o = _ring(s.cw_head, s.cw_n, th.n_cw)
+    s.cw_t[j] = now
+    s.cw_c[j] = c
+    t0 = s.cw_t[o]
+    if now > t0:
+        rpm = (c - s.cw_c[o]) * 60.0e9 / (th.counts_per_rev * (now - t0))
+        if abs(rpm) > th.max_speed_rpm:
+            keys |= 1 << OVERSPEED
+            d.speed_rpm = rpm
+    return keys
+
+
+@kernel
+def stall_fault(th, s, now, p_m1, c):
+    """Dead encoder / blocked rotor: the inlet able to turn the motor, yet no count for
+    ``stall_ns`` (what the jump rule cannot see: at low speed a missed count is allowed)."""
+    if not p_m1 > th.stall_inlet_pa or not s.stall_have or c != s.stall_c:
+        s.stall_have = 1
+        s.stall_c = c
+        s.stall_since = now
+        return 0
+    if now - s.stall_since > th.stall_ns:
+        return 1 << NO_ROTATION
+    return 0
+
+
+@kernel
+def sample_faults(th, s, d, now, p_c1, p_c2, p_m1, x, c, values, have_volts):
+    """Every sample rule but :func:`non_finite_fields`, in order; the sensor keys present.
+
+    ``values``: the raw volts (p_c1, p_c2, p_m1, laser) when ``have_volts``, else the SI
+    values (p_c1, p_c2, p_m1, x), watched for freezing; ``c``: the encoder counts.
+    """
+    keys = 0
+    if have_volts:
+        keys |= voltage_faults(th, d, values)
+    keys |= pressure_faults(th, p_c1, p_c2, p_m1)
+    keys |= position_faults(th, x)
+    keys |= frozen_faults(th, s, now, values)
+    track_velocity(th, s, now, x)
+    keys |= encoder_faults(th, s, d, now, c)
+    keys |= stall_fault(th, s, now, p_m1, c)
+    s.have_sample = 1
+    return keys
+
+
+@kernel
+def sensor_key_axes(keys):
+    """The axes (bit 0 linear, bit 1 rotary) that sensor fault ``keys`` make safe."""
+    return (1 if keys & LINEAR_KEYS else 0) | (2 if keys & ROTARY_KEYS else 0)
+
+
+# ------------------------------------------------------------------ commands and outputs
+@kernel
+def command(s, axis, u, stamp):
+    """Axis ``axis``'s command ``u`` [V] answering the sample stamped ``stamp``: what it did
+    (``CMD_*`` bits; 0: taken, nothing to report)."""
+    bit = 1 << axis
+    if not (U_MIN_V <= u <= U_MAX_V):  # NaN fails every comparison; ±inf is out of range
+        s.refused |= bit
+        return CMD_REFUSED
+    out = 0
+    if s.refused & bit:
+        s.refused &= ~bit
+        out = CMD_REFUSAL_GONE
+    if s.cmd_have[axis] and stamp < s.cmd_t[axis]:
+        return out | CMD_STALE
+    if not s.cmd_have[axis]:
+        out |= CMD_FIRST
+    s.cmd_u[axis] = u
+    s.cmd_t[axis] = stamp
+    s.cmd_have[axis] = 1
+    return out
+
+
+@kernel
+def watchdog_faults(th, s, now):
+    """Bit a: axis a's last command is older than ``watchdog_ns`` at ``now``."""
+    keys = 0
+    for a in range(2):
+        if s.cmd_have[a] and now - s.cmd_t[a] > th.watchdog_ns:
+            keys |= 1 << a
+    return keys
+
+
+@kernel
+def update_zone(th, s, d):
+    """Stroke soft limits with the braking distance v²/(2a), hysteresis on leaving (not
+    latched): what changed (``ZONE_*`` bits); ``d.braking_m`` when something did."""
+    x = s.x
+    v = s.v
+    if not math.isfinite(x):
+        return 0  # the sensor rules have made the linear axis safe
+    d_brake = v * v / (2.0 * th.max_decel_m_s2)
+    reach_hi = x + (d_brake if v > 0.0 else 0.0)
+    reach_lo = x - (d_brake if v < 0.0 else 0.0)
+    if not (s.zone_hi or s.zone_lo) and th.x_lo < reach_lo and reach_hi < th.x_hi:
+        return 0  # hot path: far from both limits
+    out = 0
+    if not s.zone_hi and reach_hi >= th.x_hi:
+        s.zone_hi = 1
+        out |= ZONE_HI_ENTERED
+    elif s.zone_hi and reach_hi < th.x_hi - th.stroke_hyst_m:
+        s.zone_hi = 0
+        out |= ZONE_HI_LEFT
+    if not s.zone_lo and reach_lo <= th.x_lo:
+        s.zone_lo = 1
+        out |= ZONE_LO_ENTERED
+    elif s.zone_lo and reach_lo > th.x_lo + th.stroke_hyst_m:
+        s.zone_lo = 0
+        out |= ZONE_LO_LEFT
+    if out:
+        d.braking_m = d_brake
+    return out
+
+
+@kernel
+def output_v(th, s, axis, blocked):
+    """The voltage to write for ``axis``: SAFE_V while ``blocked`` (a latched fault, the
+    e-stop), before its first command or the first sample; the linear axis's command
+    driving further into an active soft-limit zone is held at SAFE_V."""
+    if blocked or not s.cmd_have[axis] or not s.have_sample:
+        return SAFE_V
+    u = s.cmd_u[axis]
+    if axis == 0:
+        push = (u - SAFE_V) * th.u_toward_hi  # > 0: drives toward +x
+        if (s.zone_hi and push > 0.0) or (s.zone_lo and push < 0.0):
+            return SAFE_V
+    return u

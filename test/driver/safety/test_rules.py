@@ -1,0 +1,224 @@
+"""The safety rules are one source: the same kernels in Python and compiled give the same decisions.
+
+A small numba driver runs every rule of :mod:`pneu_driver.safety.rules` on numba
+records (elements of structured arrays) over a random stream of samples, commands
+and output ticks; the same stream runs through the same functions on Python
+records. Every decision (fault-key masks, command outcomes, zone changes, output
+voltages), every number behind a fired rule and the final rule state must agree
+bit for bit. (That :mod:`pneu_control.fastloop.supervisor` calls these rules and
+holds no copy of one: test/control/fastloop/test_supervisor_single_source.py.)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pneu_driver.safety import SafetyParams, SafetySupervisor, rules
+from pneu_msgs_py.params.records import RecordType
+
+numba = pytest.importorskip("numba")
+
+P = SafetyParams()
+T_NS = 1_000_000
+X_HI = P.stroke_m / 2 - P.stroke_margin_m
+P_LIN = P.supply_linear_pa + P.pressure_margin_pa
+P_ROT = P.supply_rotary_pa + P.pressure_margin_pa
+BAD = (math.nan, math.inf, -math.inf)
+
+
+@numba.njit(error_model="numpy")
+def _drive(th_a, s_a, d_a, f, c, volts, have, u, u_t, now, blocked, out_i, out_f):
+    """Per step k: the sample rules, both commands, the watchdog, the zone, both outputs."""
+    th = th_a[0]
+    s = s_a[0]
+    d = d_a[0]
+    for k in range(f.shape[0]):
+        t = k * 1_000_000
+        keys = rules.non_finite_fields(d, f[k, 0], f[k, 1], f[k, 2], f[k, 3], f[k, 4], f[k, 5])
+        vals = volts[k] if have[k] else f[k, :4]
+        keys |= rules.sample_faults(
+            th, s, d, t, f[k, 0], f[k, 1], f[k, 2], f[k, 3], c[k], vals, have[k]
+        )
+        out_i[k, 0] = keys
+        out_i[k, 1] = rules.command(s, 0, u[k, 0], u_t[k, 0])
+        out_i[k, 2] = rules.command(s, 1, u[k, 1], u_t[k, 1])
+        out_i[k, 3] = rules.watchdog_faults(th, s, now[k])
+        out_i[k, 4] = rules.update_zone(th, s, d)
+        out_i[k, 5] = rules.sensor_key_axes(keys)
+        out_f[k, 0] = rules.output_v(th, s, 0, blocked[k, 0])
+        out_f[k, 1] = rules.output_v(th, s, 1, blocked[k, 1])
+        out_f[k, 2] = d.jump_deviation if keys & (1 << rules.ENCODER_JUMP) else 0.0
+        out_f[k, 3] = d.speed_rpm if keys & (1 << rules.OVERSPEED) else 0.0
+        out_f[k, 4] = d.braking_m if out_i[k, 4] else 0.0
+        out_i[k, 6] = d.nf_fields
+        out_i[k, 7] = d.nf_volts if have[k] else 0
+
+
+def _python(th, s, d, f, c, volts, have, u, u_t, now, blocked):
+    n = len(f)
+    out_i = np.zeros((n, 8), dtype=np.int64)
+    out_f = np.zeros((n, 5))
+    for k in range(n):
+        t = k * T_NS
+        fk = f[k].tolist()
+        keys = rules.non_finite_fields(d, *fk)
+        vals = tuple(volts[k].tolist()) if have[k] else tuple(fk[:4])
+        keys |= rules.sample_faults(th, s, d, t, *fk[:4], int(c[k]), vals, bool(have[k]))
+        out_i[k, 0] = keys
+        out_i[k, 1] = rules.command(s, 0, float(u[k, 0]), int(u_t[k, 0]))
+        out_i[k, 2] = rules.command(s, 1, float(u[k, 1]), int(u_t[k, 1]))
+        out_i[k, 3] = rules.watchdog_faults(th, s, int(now[k]))
+        out_i[k, 4] = rules.update_zone(th, s, d)
+        out_i[k, 5] = rules.sensor_key_axes(keys)
+        out_f[k, 0] = rules.output_v(th, s, 0, int(blocked[k, 0]))
+        out_f[k, 1] = rules.output_v(th, s, 1, int(blocked[k, 1]))
+        out_f[k, 2] = d.jump_deviation if keys & (1 << rules.ENCODER_JUMP) else 0.0
+        out_f[k, 3] = d.speed_rpm if keys & (1 << rules.OVERSPEED) else 0.0
+        out_f[k, 4] = d.braking_m if out_i[k, 4] else 0.0
+        out_i[k, 6] = d.nf_fields
+        out_i[k, 7] = d.nf_volts if have[k] else 0
+    return out_i, out_f
+
+
+# one step of the stream: values near and beyond every threshold
+_pressure_lin = st.sampled_from([2.5e5, 2.4e5, P_LIN, math.nextafter(P_LIN, 1e9), *BAD])
+_pressure_rot = st.sampled_from([1.8e5, P.stall_inlet_pa, P.stall_inlet_pa + 1.0, P_ROT + 1, *BAD])
+_x = st.sampled_from([0.0, 0.01, 0.05, X_HI, X_HI - 1e-9, -X_HI, 0.08, -0.0801, *BAD])
+_volt = st.sampled_from([2.0, 2.0001, -0.3, 10.3, 5.3, 5.31, -0.31, 11.0, *BAD])
+_step = st.tuples(
+    st.tuples(
+        _pressure_lin,
+        _pressure_lin,
+        _pressure_rot,
+        _x,
+        st.sampled_from([0.0, *BAD]),
+        st.sampled_from([0.0, 1.0, *BAD]),
+    ),
+    st.sampled_from([0, 0, 1, 20, 100, 101, 1000, -50]),  # counts step
+    st.tuples(_volt, _volt, _volt, _volt),
+    st.booleans(),  # raw volts given
+    st.tuples(
+        st.sampled_from([7.0, 3.0, 0.0, 10.0, -0.001, 10.001, *BAD]),
+        st.sampled_from([6.0, 5.0, math.nan]),
+    ),
+    st.sampled_from([0, 0, 0, -3, 1]),  # command stamp offset [periods]: older, newer
+    st.sampled_from([1, 1, 1, 6, 30]),  # output tick [periods after the sample]
+    st.tuples(st.integers(0, 1), st.integers(0, 1)),  # axis blocked (latched, e-stop)
+)
+_params = st.sampled_from(
+    [
+        P,
+        dataclasses.replace(P, extend_above_neutral=False, max_accel_rad_s2=0.0, stuck_ms=3.0),
+        dataclasses.replace(P, stall_ms=2.0, velocity_window_ms=3.0, speed_window_ms=1.0),
+    ]
+)
+
+
+def _arrays(steps):
+    f = np.array([s[0] for s in steps], dtype=np.float64)
+    c = np.cumsum([s[1] for s in steps]).astype(np.int64)
+    volts = np.array([s[2] for s in steps], dtype=np.float64)
+    have = np.array([s[3] for s in steps], dtype=np.int64)
+    u = np.array([s[4] for s in steps], dtype=np.float64)
+    k = np.arange(len(steps), dtype=np.int64)
+    off = np.array([s[5] for s in steps], dtype=np.int64)
+    u_t = np.stack([(k + off) * T_NS, k * T_NS], axis=1)
+    now = (k + np.array([s[6] for s in steps], dtype=np.int64)) * T_NS
+    blocked = np.array([s[7] for s in steps], dtype=np.int64)
+    return f, c, volts, have, u, u_t, now, blocked
+
+
+def _same(a, b) -> bool:
+    return all(x == y or (x != x and y != y) for x, y in zip(a, b, strict=True))
+
+
+@settings(max_examples=60, deadline=None)
+@given(params=_params, steps=st.lists(_step, min_size=1, max_size=80))
+def test_compiled_and_python_rules_decide_the_same(params, steps):
+    th = rules.thresholds(params, 1e-3)
+    py = (th, rules.STATE.new(), rules.FINDINGS.new())
+    arrs = tuple(rules.fresh_array(r.TYPE) for r in py)
+    th.store(arrs[0][0])
+    data = _arrays(steps)
+    n = len(steps)
+    out_i, out_f = np.zeros((n, 8), dtype=np.int64), np.zeros((n, 5))
+    _drive(*arrs, *data, out_i, out_f)
+    want_i, want_f = _python(*py, *data)
+    assert np.array_equal(out_i, want_i)
+    assert np.array_equal(out_f, want_f, equal_nan=True)
+    back = rules.STATE.new()
+    back.load(arrs[1][0])
+    for name, value in py[1].values().items():  # the whole rule state, bit for bit
+        got = getattr(back, name)
+        assert _same(got, value) if isinstance(value, list) else _same([got], [value]), name
+
+
+def test_the_rules_decide_in_a_supervisor_as_in_the_kernels():
+    """SafetySupervisor's outputs and present keys are the rules' decisions (not a second copy)."""
+    sup = SafetySupervisor(P, sample_time_s=1e-3)
+    th, s, d = rules.thresholds(P, 1e-3), rules.STATE.new(), rules.FINDINGS.new()
+    from pneu_msgs_py.contract.samples import SensorSample
+
+    for k, x in enumerate([0.0, 0.02, 0.06, X_HI, 0.0801, 0.0]):
+        smp = SensorSample(k, k * T_NS, 2.5e5 + k, 2.4e5 - k, 1.8e5 + k, x, 0.0, 0.0, 0)
+        sup.check_sample(smp)
+        keys = rules.non_finite_fields(d, 2.5e5 + k, 2.4e5 - k, 1.8e5 + k, x, 0.0, 0.0)
+        keys |= rules.sample_faults(
+            th,
+            s,
+            d,
+            k * T_NS,
+            2.5e5 + k,
+            2.4e5 - k,
+            1.8e5 + k,
+            x,
+            0,
+            (2.5e5 + k, 2.4e5 - k, 1.8e5 + k, x),
+            False,
+        )
+        present = {key for bit, key in enumerate(rules.SENSOR_KEYS) if keys >> bit & 1}
+        assert set(sup.status["linear"].present) | set(sup.status["rotary"].present) == present
+
+
+def test_fault_key_table():
+    assert len(rules.SENSOR_KEYS) == len(set(rules.SENSOR_KEYS)) == 21
+    assert rules.SENSOR_KEYS[rules.NON_FINITE_ENCODER] == "non_finite:encoder"
+    assert rules.SENSOR_KEYS[rules.LIVE_RANGE + 3] == "live_range:x"
+    assert rules.SENSOR_KEYS[rules.OVER_PRESSURE + 2] == "over_pressure:p_m1"
+    assert rules.SENSOR_KEYS[rules.STROKE_LIMIT] == "stroke_limit:x"
+    assert rules.SENSOR_KEYS[rules.STUCK] == "stuck:p_c1"
+    assert rules.SENSOR_KEYS[rules.NO_ROTATION] == "no_rotation:encoder"
+    assert rules.LINEAR_KEYS & rules.ROTARY_KEYS == 0
+    assert rules.LINEAR_KEYS | rules.ROTARY_KEYS == (1 << len(rules.SENSOR_KEYS)) - 1
+    assert rules.sensor_key_axes(1 << (rules.STUCK + 2)) == 2  # p_m1: the motor's sensor
+    assert rules.sensor_key_axes(1 << rules.POSITION_RANGE | 1 << rules.OVERSPEED) == 3
+
+
+def test_a_window_longer_than_the_rings_is_refused_naming_the_field():
+    rules.thresholds(P, 1e-5)  # the default 10 ms at the shortest sim period: 1000 periods
+    with pytest.raises(
+        ValueError, match=r"^velocity_window_ms: 10\.0 refused; allowed: \(0, 5\] ms"
+    ):
+        SafetySupervisor(P, sample_time_s=5e-6)
+    long = dataclasses.replace(P, speed_window_ms=1000.0)
+    rules.thresholds(long, 1e-3)
+    with pytest.raises(ValueError, match=r"^speed_window_ms: 1000\.0 refused"):
+        rules.thresholds(long, 2e-4)
+
+
+def test_int_array_fields_round_trip():
+    rt = RecordType("R", [("t", ("i", 3)), ("v", ("f", 2), [math.nan, 1.0])])
+    r = rt.new()
+    assert r.t == [0, 0, 0] and all(isinstance(v, int) for v in r.t)
+    r.t[1] = 2**62 + 1  # an int ns stamp beyond float64's 2^53
+    arr = rules.fresh_array(rt)
+    assert math.isnan(arr[0]["v"][0]) and arr[0]["v"][1] == 1.0
+    r.store(arr[0])
+    back = rt.new()
+    back.load(arr[0])
+    assert back.t == [0, 2**62 + 1, 0] and arr.dtype["t"].base == np.int64
