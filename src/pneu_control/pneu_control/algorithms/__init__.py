@@ -1,4 +1,4 @@
-"""Control algorithms behind one interface (:mod:`.base`): PID, LADRC, ESO-SMC, ESO-SMC+ (ours).
+"""Control algorithms behind one interface (:mod:`.base`): PID, LADRC, ESO-SMC, ESO-SMC+ and coast (ours).
 
 Each module holds one algorithm and its parameter group; :mod:`.smc` what the
 sliding-mode laws share, :mod:`.valve_curve` the MPYE flow linearisation.
@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from pneu_control.algorithms.base import Algorithm, StepInput
+from pneu_control.algorithms.coast import Coast, CoastParams
 from pneu_control.algorithms.eso_smc import EsoSmc, EsoSmcParams
 from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus, EsoSmcPlusParams
 from pneu_control.algorithms.ladrc import Ladrc, LadrcParams
@@ -29,15 +30,23 @@ __all__ = [
     "LadrcParams",
     "EsoSmcParams",
     "EsoSmcPlusParams",
+    "CoastParams",
     "Pid",
     "Ladrc",
     "EsoSmc",
     "EsoSmcPlus",
+    "Coast",
     "make_algorithm",
     "ALGORITHM_CLASSES",
 ]
 
-ALGORITHM_CLASSES = {"pid": Pid, "ladrc": Ladrc, "eso_smc": EsoSmc, "eso_smc_plus": EsoSmcPlus}
+ALGORITHM_CLASSES = {
+    "pid": Pid,
+    "ladrc": Ladrc,
+    "eso_smc": EsoSmc,
+    "eso_smc_plus": EsoSmcPlus,
+    "coast": Coast,
+}
 
 
 def make_algorithm(params: AxisControllerParams, axis: str) -> Algorithm:

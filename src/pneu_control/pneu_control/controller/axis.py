@@ -46,18 +46,31 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.contract.topics import DEFAULT_STATE_FIELDS
 from pneu_msgs_py.params.core import ParamError, validate
+from pneu_msgs_py.params.records import RecordType, kernel
 
 from pneu_control.algorithms import make_algorithm
-from pneu_control.algorithms.base import StepInput
+from pneu_control.algorithms.base import MAX_HISTORY, StepInput
 from pneu_control.controller.params import AxisControllerParams
 from pneu_control.controller.references import axis_scale, make_reference
-from pneu_control.observers.td import TrackingDifferentiator
+from pneu_control.observers.td import td_step
 
-__all__ = ["AxisController", "ControllerState", "STATE_FIELDS"]
+# the algorithms that position a rotary angle (rotary_control: angle): the generic
+# second-order laws, and coast (one-way drive, the paper's plumbing)
+ANGLE_ALGORITHMS = ("pid", "ladrc", "eso_smc", "coast")
+
+__all__ = [
+    "ANGLE_ALGORITHMS",
+    "AXIS_CONSTANTS",
+    "AXIS_STATE",
+    "AxisController",
+    "ControllerState",
+    "STATE_FIELDS",
+]
 
 _NAN = float("nan")
 
@@ -93,6 +106,141 @@ class ControllerState:
 STATE_FIELDS: tuple[str, ...] = DEFAULT_STATE_FIELDS
 
 
+# The axis's own steps, kernels on records (docs/design.md §11): AxisController runs them
+# here, the compiled loop (pneu_control.fastloop) runs the same functions.
+AXIS_CONSTANTS = RecordType(
+    "AxisConstants",
+    [
+        ("scale", "f"), ("T", "f"), ("neutral", "f"), ("td_r", "f"), ("td_h", "f"),
+        ("measured", "i"),  # MEASURE_X, MEASURE_OMEGA or MEASURE_THETA
+        ("angle", "i"), ("td_on", "i"), ("uses_td", "i"),
+    ],
+)  # fmt: skip
+AXIS_STATE = RecordType(
+    "AxisState",
+    [
+        ("started", "i"), ("u_last", "f"), ("th_r", "f", 0.0), ("v1_prev", "f", 0.0),
+        ("td_v1", "f", 0.0), ("td_v2", "f", 0.0), ("td_v3", "f", 0.0),
+    ],
+)  # fmt: skip
+
+
+MEASURE_X, MEASURE_OMEGA, MEASURE_THETA = 0, 1, 2
+
+
+@kernel
+def measured(a, x, omega, theta):
+    """The controlled output in SI: x (m) linear, ω (rad/s) rotary speed, θ (rad) rotary angle."""
+    if a.measured == MEASURE_X:
+        return x
+    if a.measured == MEASURE_OMEGA:
+        return omega
+    return theta
+
+
+@kernel
+def td_advance(a, st, rp, rdp, rddp):
+    """The TD on the reference (Eq. 23–24) when on; else the reference itself: (v1, v2, v3)."""
+    if a.td_on:
+        v1, v2, v3 = td_step(st.td_v1, st.td_v2, rp, a.td_r, a.td_h, a.T)
+        st.td_v1 = v1
+        st.td_v2 = v2
+        st.td_v3 = v3
+        return v1, v2, v3
+    return rp, rdp, rddp
+
+
+@kernel
+def measure(a, inp, y_si, theta_si, p_c1, p_c2, needs_theta):
+    """Paper units of one sample: (finite, y, θ); fills the angle and pressures of ``inp``.
+
+    y: mm or rpm; θ (rpm·s) only in ``rotary_model: angle`` (else 0). Not finite (a NaN
+    or inf measurement, or angle where it is read): the caller holds the last command.
+    """
+    k = a.scale
+    if a.angle:
+        th = theta_si * k  # rpm·s: the angle whose derivative is the speed in rpm
+        if not (-1e300 < y_si < 1e300 and -1e300 < th < 1e300):
+            return False, 0.0, 0.0
+    else:
+        th = 0.0
+        if not (-1e300 < y_si < 1e300):
+            return False, 0.0, 0.0
+    if needs_theta:  # an angle-observer algorithm (ESO-SMC+) reads the encoder angle, rpm·s
+        th_a = theta_si * k
+        if not (-1e300 < th_a < 1e300):
+            return False, 0.0, 0.0
+        inp.theta = th_a
+    inp.p_c1 = p_c1  # chamber pressures, Pa abs (read by uses_pressures algorithms)
+    inp.p_c2 = p_c2
+    return True, y_si * k, th
+
+
+@kernel
+def fill_inputs(a, st, inp, y, th, rp, rdp, rddp, v1, v2, v3, u_applied):
+    """The step input: TD output or raw reference; angle domain (θ, θ_r) or speed/position."""
+    if a.angle and a.uses_td:
+        inp.y = th
+        inp.r = st.th_r
+        inp.r_dot = v1
+        inp.r_ddot = v2
+    elif a.uses_td:
+        inp.y = y
+        inp.r = v1
+        inp.r_dot = v2
+        inp.r_ddot = v3
+    else:
+        inp.y = y
+        inp.r = rp
+        inp.r_dot = rdp
+        inp.r_ddot = rddp
+    inp.u_applied = u_applied
+
+
+@kernel
+def cold_inputs(a, st, inp, y, th, rp, rdp, rddp):
+    """First sample: the TD starts at the measurement (a soft start), θ_r at the angle."""
+    st.td_v1 = y
+    st.td_v2 = 0.0
+    st.td_v3 = 0.0
+    v1, v2, v3 = td_advance(a, st, rp, rdp, rddp)
+    st.th_r = th
+    st.v1_prev = v1
+    st.started = 1
+    fill_inputs(a, st, inp, y, th, rp, rdp, rddp, v1, v2, v3, 0.0)
+
+
+@kernel
+def step_inputs(a, st, inp, y, th, rp, rdp, rddp):
+    """Every later sample: the TD, Eq. 25 on the angle (θ_r = ∫v1 dt, trapezoid), u_applied."""
+    v1, v2, v3 = td_advance(a, st, rp, rdp, rddp)
+    if a.angle:
+        st.th_r = st.th_r + 0.5 * a.T * (st.v1_prev + v1)
+        st.v1_prev = v1
+    fill_inputs(a, st, inp, y, th, rp, rdp, rddp, v1, v2, v3, inp.history[0] - a.neutral)
+
+
+@kernel
+def finish(st, inp, u):
+    """u (V) becomes the newest command of the history (oldest dropped) and the last one."""
+    n = inp.n_hist
+    hist = inp.history
+    for i in range(n - 1):
+        hist[i] = hist[i + 1]
+    hist[n - 1] = u
+    st.u_last = u
+    return u
+
+
+@kernel
+def state_values(a, st, t, r, rd, y_si, z1, z2, z3, s, u_raw):
+    """The :data:`STATE_FIELDS` values of the last update (SI; valve volts absolute)."""
+    k = a.scale
+    return (
+        t, r, rd, y_si, r - y_si, z1 / k, z2 / k, z3 / k, s / k, u_raw + a.neutral, st.u_last,
+    )  # fmt: skip
+
+
 class AxisController:
     """Controller core of one axis (``"linear"`` or ``"rotary"``); see module docstring."""
 
@@ -100,8 +248,9 @@ class AxisController:
         if axis not in ("linear", "rotary"):
             raise ParamError("axis", axis, "one of linear, rotary")
         self.axis = axis
-        self._scale = axis_scale(axis)
         self._linear = axis == "linear"
+        self._control = "position" if self._linear else params.rotary_control
+        self._scale = axis_scale(axis, params.rotary_control)
         self._angle = axis == "rotary" and params.rotary_model == "angle"
         built = self._build(params)
         self._commit(built)
@@ -119,7 +268,29 @@ class AxisController:
             raise ParamError(
                 "eso_smc.friction_compensation", True, "false on the linear axis (Eq. 31 is rotary)"
             )
-        ref = make_reference(params.reference, self.axis, sample_time_s=params.sample_time_s)
+        angle_control = not self._linear and params.rotary_control == "angle"
+        if angle_control and params.algorithm == "eso_smc" and params.eso_smc.friction_compensation:
+            raise ParamError(
+                "eso_smc.friction_compensation",
+                True,
+                "false with rotary_control: angle (Eq. 31 is the speed loop's)",
+            )
+        if angle_control and params.algorithm not in ANGLE_ALGORITHMS:
+            raise ParamError(
+                "algorithm",
+                params.algorithm,
+                f"one of {', '.join(ANGLE_ALGORITHMS)} with rotary_control: angle",
+            )
+        if not angle_control and params.algorithm == "coast":
+            raise ParamError(
+                "algorithm",
+                "coast",
+                "pid, ladrc, eso_smc or eso_smc_plus (coast positions an angle: "
+                "rotary_control: angle)",
+            )
+        ref = make_reference(
+            params.reference, self.axis, params.sample_time_s, rotary_control=params.rotary_control
+        )
         alg = make_algorithm(params, self.axis)
         return params, ref, alg
 
@@ -136,6 +307,23 @@ class AxisController:
         self._u_lo = params.limits.u_min
         self._u_hi = params.limits.u_max
         self._a_blend = math.exp(-params.sample_time_s / params.bumpless_time_s)
+        self._c = self.constants(params, alg)
+
+    def constants(self, params: AxisControllerParams, alg) -> Any:
+        """The :data:`AXIS_CONSTANTS` record of ``params`` with algorithm ``alg``."""
+        return AXIS_CONSTANTS.new(
+            scale=self._scale,
+            T=params.sample_time_s,
+            neutral=params.limits.u_neutral,
+            td_r=float(params.td.r),
+            td_h=float(params.td.h),
+            measured=MEASURE_X
+            if self._linear
+            else (MEASURE_THETA if params.rotary_control == "angle" else MEASURE_OMEGA),
+            angle=int(self._angle),
+            td_on=int(params.td.enabled),
+            uses_td=int(alg.uses_td),
+        )
 
     @property
     def params(self) -> AxisControllerParams:
@@ -165,6 +353,12 @@ class AxisController:
                 params.transport_delay_samples,
                 f"read-only at run time ({old.transport_delay_samples})",
             )
+        if params.rotary_control != old.rotary_control:
+            raise ParamError(
+                "rotary_control",
+                params.rotary_control,
+                f"read-only at run time ({old.rotary_control})",
+            )
         if params.rotary_model != old.rotary_model:
             raise ParamError(
                 "rotary_model", params.rotary_model, f"read-only at run time ({old.rotary_model})"
@@ -178,18 +372,20 @@ class AxisController:
             self._pending = None
         p = self._params
         self._alg = make_algorithm(p, self.axis)
-        self._td = TrackingDifferentiator(p.td.r, p.td.h, p.sample_time_s)
         self._t0_ns: int | None = None
-        self._started = False
-        self._u_hist = [self._neutral] * (self._delay + 1)  # V, oldest first
-        self._inp = StepInput(history=self._u_hist)  # the algorithms' input, filled per sample
-        self._u_last = self._neutral
+        self._st = AXIS_STATE.new(u_last=self._neutral)
+        n = self._delay + 1
+        # the algorithms' input, filled per sample; its history: V, oldest first
+        self._inp = StepInput(n_hist=n, history=[self._neutral] * n + [0.0] * (MAX_HISTORY - n))
         self._blend = 0.0  # V, decaying bumpless offset
         self._t = 0.0
-        self._th_r = self._v1_prev = 0.0  # rotary angle mode: θ_r and the last v1
         self._r = self._rd = self._y = _NAN
         self._dirty = True
         self.n_nonfinite = 0
+
+    @property
+    def _u_last(self) -> float:
+        return self._st.u_last
 
     # -- the cycle ----------------------------------------------------------
     def update(self, sample: SensorSample) -> float:
@@ -198,62 +394,27 @@ class AxisController:
         if self._t0_ns is None:
             self._t0_ns = stamp
         t = (stamp - self._t0_ns) * 1e-9
-        y_si = sample.x if self._linear else sample.omega
+        c = self._c
+        y_si = measured(c, sample.x, sample.omega, sample.theta)
         r, rd, rdd = self._ref(t)
         self._t, self._r, self._rd, self._y = t, r, rd, y_si
         self._dirty = True
+        st, inp = self._st, self._inp
+        pending = self._pending
+        needs_theta = self._alg.uses_theta or (pending is not None and pending[2].uses_theta)
+        ok, y, th = measure(c, inp, y_si, sample.theta, sample.p_c1, sample.p_c2, needs_theta)
+        if not ok:  # NaN/inf: hold, count
+            self.n_nonfinite += 1
+            return st.u_last
         k = self._scale
-        if self._angle:
-            th = sample.theta * k  # rpm·s: the angle whose derivative is the speed in rpm
-            if not (-1e300 < y_si < 1e300 and -1e300 < th < 1e300):  # NaN/inf: hold, count
-                self.n_nonfinite += 1
-                return self._u_last
-        else:
-            th = 0.0
-            if not (-1e300 < y_si < 1e300):
-                self.n_nonfinite += 1
-                return self._u_last
-        y = y_si * k
         rp, rdp, rddp = r * k, rd * k, rdd * k
-        inp = self._inp
-        if self._alg.uses_theta or (self._pending is not None and self._pending[2].uses_theta):
-            # an angle-observer algorithm (ESO-SMC+) reads the encoder angle, rpm·s
-            th_a = sample.theta * k
-            if not (-1e300 < th_a < 1e300):
-                self.n_nonfinite += 1
-                return self._u_last
-            inp.theta = th_a
-        inp.p_c1 = sample.p_c1  # chamber pressures, Pa abs (read by uses_pressures algorithms)
-        inp.p_c2 = sample.p_c2
-        if self._pending is not None or not self._started:
+        if pending is not None or not st.started:
             return self._switch(y, th, rp, rdp, rddp)
-        if self._td_on:  # the TD runs on the reference whatever the algorithm
-            td = self._td
-            td.step(rp)
-            v1, v2, v3 = td.v1, td.v2, td.v3
-        else:
-            v1, v2, v3 = rp, rdp, rddp
-        alg = self._alg
-        if self._angle:  # Eq. 25 on the angle: reference θ_r = ∫v1 dt (trapezoid)
-            th_r = self._th_r + 0.5 * self._T * (self._v1_prev + v1)
-            self._th_r, self._v1_prev = th_r, v1
-            if alg.uses_td:
-                y, v1, v2, v3 = th, th_r, v1, v2
-            else:
-                v1, v2, v3 = rp, rdp, rddp
-        elif not alg.uses_td:
-            v1, v2, v3 = rp, rdp, rddp
-        hist = self._u_hist
-        neutral = self._neutral
-        inp.y, inp.r, inp.r_dot, inp.r_ddot = y, v1, v2, v3
-        inp.u_applied = hist[0] - neutral
-        u = alg.update(inp) + neutral
+        step_inputs(c, st, inp, y, th, rp, rdp, rddp)
+        u = self._alg.update(inp) + self._neutral
         if self._blend != 0.0:
             u = self._blended(u)
-        del hist[0]
-        hist.append(u)
-        self._u_last = u
-        return u
+        return finish(st, inp, u)
 
     def _blended(self, u: float) -> float:
         b = self._blend * self._a_blend
@@ -261,84 +422,55 @@ class AxisController:
         u += b
         return self._u_hi if u > self._u_hi else (self._u_lo if u < self._u_lo else u)
 
-    def _finish(self, u_dev: float) -> float:
-        u = u_dev + self._neutral
-        hist = self._u_hist
-        del hist[0]
-        hist.append(u)
-        self._u_last = u
-        return u
-
-    def _inputs(self, alg, y, th, rp, rdp, rddp, v1, v2, v3, u_applied) -> StepInput:
-        """The step input for ``alg``: TD output or raw reference; angle or speed domain."""
-        inp = self._inp
-        if self._angle and alg.uses_td:
-            inp.y, inp.r, inp.r_dot, inp.r_ddot = th, self._th_r, v1, v2
-        elif alg.uses_td:
-            inp.y, inp.r, inp.r_dot, inp.r_ddot = y, v1, v2, v3
-        else:
-            inp.y, inp.r, inp.r_dot, inp.r_ddot = y, rp, rdp, rddp
-        inp.u_applied = u_applied
-        return inp
-
     def _switch(self, y, th, rp, rdp, rddp) -> float:
         """Cold start, or apply the pending set bumplessly (see module docstring)."""
-        started = self._started
+        st, inp = self._st, self._inp
+        if not st.started:  # cold start: TD from the measured speed/position (soft start)
+            if self._pending is not None:
+                self._apply_pending()
+                rp, rdp, rddp = self._reference_now()
+            cold_inputs(self._c, st, inp, y, th, rp, rdp, rddp)
+            u = self._alg.start(inp, None, (_NAN, _NAN, _NAN))
+            return finish(st, inp, u + self._neutral)
         old_alg = self._alg
-        td = self._td
-        u_applied_v = self._u_hist[0]
-        n_old = self._neutral
-        hint = (_NAN, _NAN, _NAN)
-        if started:
-            # advance the reference pipeline with the old set, then bring the old
-            # algorithm's estimates to this sample (its command is discarded)
-            if self._td_on:
-                td.step(rp)
-                v1, v2, v3 = td.v1, td.v2, td.v3
-            else:
-                v1, v2, v3 = rp, rdp, rddp
-            if self._angle:
-                self._th_r += 0.5 * self._T * (self._v1_prev + v1)
-                self._v1_prev = v1
-            old_alg.update(
-                self._inputs(old_alg, y, th, rp, rdp, rddp, v1, v2, v3, u_applied_v - n_old)
-            )
-            hint = old_alg.hint
-        if self._pending is not None:
-            params, ref, new_alg = self._pending  # a fresh instance: no shared state
-            self._pending = None
-            self._commit((params, ref, new_alg))
-            # the reference may have changed: re-evaluate at this sample's time
-            k = self._scale
-            r_si, rd_si, rdd_si = ref(self._t)
-            self._r, self._rd = r_si, rd_si
-            rp, rdp, rddp = r_si * k, rd_si * k, rdd_si * k
-            td.r, td.h = params.td.r, params.td.h
+        u_applied_v = inp.history[0]
+        # advance the reference pipeline with the old set, then bring the old algorithm's
+        # estimates to this sample (its command is discarded)
+        step_inputs(self._c, st, inp, y, th, rp, rdp, rddp)
+        old_alg.update(inp)
+        hint = old_alg.hint
+        self._apply_pending()
+        rp, rdp, rddp = self._reference_now()
         new_alg = self._alg
-        if not started:  # cold start: TD from the measured speed/position (soft start)
-            td.reset(y, 0.0)
-            if self._td_on:
-                td.step(rp)
-            v1, v2, v3 = (td.v1, td.v2, td.v3) if self._td_on else (rp, rdp, rddp)
-            self._th_r, self._v1_prev = th, v1
-            self._started = True
-            inp = self._inputs(new_alg, y, th, rp, rdp, rddp, v1, v2, v3, 0.0)
-            return self._finish(new_alg.start(inp, None, (_NAN, _NAN, _NAN)))
+        c = self._c
         if self._td_on:
             if not self._td_was_on:  # TD just enabled: start it on the reference
-                td.reset(rp - 2.0 * td.h * rdp, rdp)  # fhan's steady ramp lag is 2h
-                td.step(rp)
-            v1, v2, v3 = td.v1, td.v2, td.v3
+                st.td_v1, st.td_v2 = rp - 2.0 * c.td_h * rdp, rdp  # fhan's steady ramp lag is 2h
+                st.td_v3 = 0.0
+                td_advance(c, st, rp, rdp, rddp)
+            v1, v2, v3 = st.td_v1, st.td_v2, st.td_v3
         else:
             v1, v2, v3 = rp, rdp, rddp
         if self._angle and old_alg.uses_td != new_alg.uses_td:  # speed ↔ angle domain
             hint = (th, hint[0], hint[1]) if new_alg.uses_td else (hint[1], hint[2], _NAN)
         n = self._neutral
-        inp = self._inputs(new_alg, y, th, rp, rdp, rddp, v1, v2, v3, u_applied_v - n)
-        u_new = new_alg.start(inp, self._u_last - n, hint) + n
+        fill_inputs(c, st, inp, y, th, rp, rdp, rddp, v1, v2, v3, u_applied_v - n)
+        u_new = new_alg.start(inp, st.u_last - n, hint) + n
         # bumpless: the first command equals the last one; the offset then decays
-        self._blend = (self._u_last - u_new) / self._a_blend  # _blended() decays it once
-        return self._finish(self._blended(u_new) - n)
+        self._blend = (st.u_last - u_new) / self._a_blend  # _blended() decays it once
+        return finish(st, inp, (self._blended(u_new) - n) + n)  # as u_dev + neutral
+
+    def _apply_pending(self) -> None:
+        params, ref, new_alg = self._pending  # a fresh instance: no shared state
+        self._pending = None
+        self._commit((params, ref, new_alg))
+
+    def _reference_now(self) -> tuple[float, float, float]:
+        """The (possibly new) reference at this sample's time, in paper units."""
+        k = self._scale
+        r_si, rd_si, rdd_si = self._ref(self._t)
+        self._r, self._rd = r_si, rd_si
+        return r_si * k, rd_si * k, rdd_si * k
 
     # -- what it did --------------------------------------------------------
     @property
@@ -346,20 +478,11 @@ class AxisController:
         """The last update's :class:`ControllerState` (refreshed in place; copy to keep)."""
         st = self._state
         if self._dirty:
-            k = self._scale
-            a = self._alg
-            st.t = self._t
-            st.reference = self._r
-            st.reference_dot = self._rd
-            st.measured = self._y
-            st.error = self._r - self._y
-            st.z1 = a.z1 / k
-            st.z2 = a.z2 / k
-            st.z3 = a.z3 / k
-            st.s = a.s / k
-            st.u_raw = a.u_raw + self._neutral
-            st.u_sat = self._u_last
-            st.algorithm = a.name
+            (
+                st.t, st.reference, st.reference_dot, st.measured, st.error, st.z1, st.z2,
+                st.z3, st.s, st.u_raw, st.u_sat,
+            ) = self._values()  # fmt: skip
+            st.algorithm = self._alg.name
             self._dirty = False
         return st
 
@@ -367,15 +490,13 @@ class AxisController:
         """The float fields of :attr:`state` in :data:`STATE_FIELDS` order."""
         st = self.state
         return (
-            st.t,
-            st.reference,
-            st.reference_dot,
-            st.measured,
-            st.error,
-            st.z1,
-            st.z2,
-            st.z3,
-            st.s,
-            st.u_raw,
-            st.u_sat,
-        )
+            st.t, st.reference, st.reference_dot, st.measured, st.error, st.z1, st.z2, st.z3,
+            st.s, st.u_raw, st.u_sat,
+        )  # fmt: skip
+
+    def _values(self) -> tuple[float, ...]:
+        a = self._alg
+        return state_values(
+            self._c, self._st, self._t, self._r, self._rd, self._y, a.z1, a.z2, a.z3, a.s,
+            a.u_raw,
+        )  # fmt: skip

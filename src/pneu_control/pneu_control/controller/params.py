@@ -36,7 +36,13 @@ from pneu_msgs_py.params.core import (
 )
 from pneu_msgs_py.params.yaml_file import load_yaml, located
 
-from pneu_control.algorithms import EsoSmcParams, EsoSmcPlusParams, LadrcParams, PidParams
+from pneu_control.algorithms import (
+    CoastParams,
+    EsoSmcParams,
+    EsoSmcPlusParams,
+    LadrcParams,
+    PidParams,
+)
 
 __all__ = [
     "ALGORITHMS",
@@ -50,7 +56,7 @@ __all__ = [
     "ParamError",
 ]
 
-ALGORITHMS = ("pid", "ladrc", "eso_smc", "eso_smc_plus")
+ALGORITHMS = ("pid", "ladrc", "eso_smc", "eso_smc_plus", "coast")
 REFERENCE_KINDS = ("sine", "smooth_step", "constant", "ramp", "waypoints")
 
 _POS = {"lo": 0.0, "lo_open": True}  # strictly positive
@@ -157,6 +163,7 @@ class AxisControllerParams:
     ladrc: LadrcParams = param(LadrcParams)
     eso_smc: EsoSmcParams = param(EsoSmcParams)
     eso_smc_plus: EsoSmcPlusParams = param(EsoSmcPlusParams)
+    coast: CoastParams = param(CoastParams)
     td: TdParams = param(TdParams)
     limits: LimitsParams = param(LimitsParams)
     reference: ReferenceParams = param(ReferenceParams)
@@ -178,6 +185,14 @@ class AxisControllerParams:
         hi=5,
         read_only=True,
     )
+    rotary_control: str = param(
+        "speed",
+        choices=("speed", "angle"),
+        desc="what the rotary axis controls: its speed (rpm, the paper's experiment) or its "
+        "multi-turn angle on the encoder (degrees: references, gains and errors in °); "
+        "ignored on the linear axis",
+        read_only=True,
+    )
     rotary_model: str = param(
         "speed",
         choices=("speed", "angle"),
@@ -197,6 +212,12 @@ class AxisControllerParams:
 
     def _check(self) -> None:
         T = self.sample_time_s
+        if self.rotary_control == "angle" and self.rotary_model == "angle":
+            raise ParamError(
+                "rotary_model",
+                self.rotary_model,
+                "speed with rotary_control: angle (the angle is then the controlled output)",
+            )
         smc = self.eso_smc
         if smc.friction_compensation:
             from pneu_msgs_py.contract.units import RPM_PER_RAD_S

@@ -24,14 +24,14 @@ Kinds (``u`` = scale: mm → m or rpm → rad/s, τ = max(t − t0, 0)):
 
 from __future__ import annotations
 
-import bisect
 import csv
 import math
 from pathlib import Path
 from typing import Protocol
 
-from pneu_msgs_py.contract.units import MM_PER_M, RPM_PER_RAD_S
+from pneu_msgs_py.contract.units import DEG_PER_RAD, MM_PER_M, RPM_PER_RAD_S
 from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.records import Record, RecordType, kernel
 
 from pneu_control.controller.params import ReferenceParams
 
@@ -45,17 +45,20 @@ __all__ = [
     "Waypoints",
     "load_waypoints",
     "axis_scale",
+    "REFERENCE",
+    "reference_at",
 ]
 
 _TWO_PI = 2.0 * math.pi
 
 
-def axis_scale(axis: str) -> float:
-    """Paper units per SI unit: 1000 (mm per m) linear, 9.549 (rpm per rad/s) rotary."""
+def axis_scale(axis: str, rotary_control: str = "speed") -> float:
+    """Paper units per SI unit: 1000 (mm per m) linear, 9.549 (rpm per rad/s) rotary speed,
+    57.30 (degrees per rad) rotary angle (``rotary_control: angle``)."""
     if axis == "linear":
         return MM_PER_M
     if axis == "rotary":
-        return RPM_PER_RAD_S
+        return DEG_PER_RAD if rotary_control == "angle" else RPM_PER_RAD_S
     raise ParamError("axis", axis, "one of linear, rotary")
 
 
@@ -63,65 +66,186 @@ class Reference(Protocol):
     def __call__(self, t: float) -> tuple[float, float, float]: ...
 
 
-class Sine:
+# Every kind is one record type (named fields; a kind uses its own) and one kernel
+# (docs/design.md §11): the classes below call it; the compiled loop calls it too.
+REF_SINE, REF_SMOOTH_STEP, REF_CONSTANT, REF_RAMP, REF_WAYPOINTS = 0, 1, 2, 3, 4
+REFERENCE = RecordType(
+    "ReferenceConstants",
+    [
+        ("kind", "i"),
+        ("a", "f", 0.0), ("w", "f", 0.0), ("c", "f", 0.0),  # sine
+        ("r0", "f", 0.0), ("dr", "f", 0.0), ("d", "f", 0.0), ("k", "f", 0.0),  # steps, ramps
+        ("v", "f", 0.0),  # constant
+        ("t0", "f", 0.0),
+        ("n", "i"),  # waypoints: knots in the table
+    ],
+)  # fmt: skip
+NO_KNOTS: list[list[float]] = [[0.0], [0.0], [0.0], [0.0]]
+
+
+@kernel
+def sine_ref(c, t):
+    """offset + amplitude·sin(ω (t − t0)), ω = 2π f."""
+    tau = t - c.t0
+    if tau <= 0.0:
+        return c.c, 0.0, 0.0
+    a = c.a
+    w = c.w
+    sn = math.sin(w * tau)
+    cs = math.cos(w * tau)
+    return c.c + a * sn, a * w * cs, -a * w * w * sn
+
+
+@kernel
+def smooth_step_ref(c, t):
+    """Eq. 38 generalised: r0 → r0 + Δr over d s."""
+    tau = t - c.t0
+    if tau <= 0.0:
+        return c.r0, 0.0, 0.0
+    d = c.d
+    if tau >= d:
+        return c.r0 + c.dr, 0.0, 0.0
+    ph = _TWO_PI * tau / d
+    g = c.dr / d
+    # Eq. 38: x = 30t/π − (60/π²) sin(πt/2) with D = 4, Δr = 120/π
+    return (
+        c.r0 + c.dr * (tau / d - math.sin(ph) / _TWO_PI),
+        g * (1.0 - math.cos(ph)),
+        g * (_TWO_PI / d) * math.sin(ph),
+    )
+
+
+@kernel
+def ramp_ref(c, t):
+    """r0 + k (t − t0), held after d s (d = 0: endless)."""
+    tau = t - c.t0
+    if tau <= 0.0:
+        return c.r0, 0.0, 0.0
+    if c.d > 0.0 and tau >= c.d:
+        return c.r0 + c.k * c.d, 0.0, 0.0
+    return c.r0 + c.k * tau, c.k, 0.0
+
+
+@kernel
+def waypoints_ref(knots, n, t):
+    """Quintic Hermite through n knots: rows (t, r, v, a) of ``knots``."""
+    ts = knots[0]
+    rs = knots[1]
+    if t <= ts[0]:
+        return rs[0], 0.0, 0.0
+    if t >= ts[n - 1]:
+        return rs[n - 1], 0.0, 0.0
+    lo = 0  # bisect.bisect_right(ts, t)
+    hi = n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if t < ts[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    i = lo - 1
+    h = ts[i + 1] - ts[i]
+    s = (t - ts[i]) / h
+    p0 = rs[i]
+    p1 = rs[i + 1]
+    vs = knots[2]
+    acc = knots[3]
+    v0 = vs[i] * h
+    v1 = vs[i + 1] * h
+    a0 = acc[i] * h * h
+    a1 = acc[i + 1] * h * h
+    s2 = s * s
+    s3 = s * s * s
+    s4 = s3 * s
+    s5 = s3 * s2
+    # quintic Hermite basis and its derivatives in s
+    h00 = 1.0 - 10.0 * s3 + 15.0 * s4 - 6.0 * s5
+    h10 = s - 6.0 * s3 + 8.0 * s4 - 3.0 * s5
+    h20 = 0.5 * (s2 - 3.0 * s3 + 3.0 * s4 - s5)
+    h01 = 10.0 * s3 - 15.0 * s4 + 6.0 * s5
+    h11 = -4.0 * s3 + 7.0 * s4 - 3.0 * s5
+    h21 = 0.5 * (s3 - 2.0 * s4 + s5)
+    d00 = -30.0 * s2 + 60.0 * s3 - 30.0 * s4
+    d10 = 1.0 - 18.0 * s2 + 32.0 * s3 - 15.0 * s4
+    d20 = 0.5 * (2.0 * s - 9.0 * s2 + 12.0 * s3 - 5.0 * s4)
+    d11 = -12.0 * s2 + 28.0 * s3 - 15.0 * s4
+    d21 = 0.5 * (3.0 * s2 - 8.0 * s3 + 5.0 * s4)
+    e00 = -60.0 * s + 180.0 * s2 - 120.0 * s3
+    e10 = -36.0 * s + 96.0 * s2 - 60.0 * s3
+    e20 = 0.5 * (2.0 - 18.0 * s + 36.0 * s2 - 20.0 * s3)
+    e11 = -24.0 * s + 84.0 * s2 - 60.0 * s3
+    e21 = 0.5 * (6.0 * s - 24.0 * s2 + 20.0 * s3)
+    r = h00 * p0 + h10 * v0 + h20 * a0 + h01 * p1 + h11 * v1 + h21 * a1
+    rd = d00 * p0 + d10 * v0 + d20 * a0 - d00 * p1 + d11 * v1 + d21 * a1
+    rdd = e00 * p0 + e10 * v0 + e20 * a0 - e00 * p1 + e11 * v1 + e21 * a1
+    return r, rd / h, rdd / (h * h)
+
+
+@kernel
+def reference_at(c, knots, t):
+    """(r, ṙ, r̈) in SI at t s for any kind (the compiled loop's entry)."""
+    kind = c.kind
+    if kind == REF_CONSTANT:
+        return c.v, 0.0, 0.0
+    if kind == REF_SINE:
+        return sine_ref(c, t)
+    if kind == REF_SMOOTH_STEP:
+        return smooth_step_ref(c, t)
+    if kind == REF_RAMP:
+        return ramp_ref(c, t)
+    return waypoints_ref(knots, c.n, t)
+
+
+class _Kernelled:
+    """A reference held as a :data:`REFERENCE` record (``rc``) and its ``knots`` table."""
+
+    knots: list[list[float]] = NO_KNOTS
+    rc: Record
+
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        return reference_at(self.rc, self.knots, t)
+
+
+class Sine(_Kernelled):
     """offset + amplitude·sin(2π f (t − t0)) (SI)."""
 
     def __init__(self, amplitude: float, frequency_hz: float, offset: float, t0: float = 0.0):
         self.a, self.w, self.c, self.t0 = amplitude, _TWO_PI * frequency_hz, offset, t0
+        self.rc = REFERENCE.new(kind=REF_SINE, a=self.a, w=self.w, c=offset, t0=t0)
 
     def __call__(self, t: float) -> tuple[float, float, float]:
-        tau = t - self.t0
-        if tau <= 0.0:
-            return self.c, 0.0, 0.0
-        a, w = self.a, self.w
-        sn, cs = math.sin(w * tau), math.cos(w * tau)
-        return self.c + a * sn, a * w * cs, -a * w * w * sn
+        return sine_ref(self.rc, t)
 
 
-class SmoothStep:
+class SmoothStep(_Kernelled):
     """Eq. 38 generalised: start → target over ``duration`` s (SI)."""
 
     def __init__(self, start: float, target: float, duration: float, t0: float = 0.0):
         self.r0, self.dr, self.d, self.t0 = start, target - start, duration, t0
+        self.rc = REFERENCE.new(kind=REF_SMOOTH_STEP, r0=start, dr=self.dr, d=duration, t0=t0)
 
     def __call__(self, t: float) -> tuple[float, float, float]:
-        tau = t - self.t0
-        if tau <= 0.0:
-            return self.r0, 0.0, 0.0
-        d = self.d
-        if tau >= d:
-            return self.r0 + self.dr, 0.0, 0.0
-        ph = _TWO_PI * tau / d
-        g = self.dr / d
-        # Eq. 38: x = 30t/π − (60/π²) sin(πt/2) with D = 4, Δr = 120/π
-        return (
-            self.r0 + self.dr * (tau / d - math.sin(ph) / _TWO_PI),
-            g * (1.0 - math.cos(ph)),
-            g * (_TWO_PI / d) * math.sin(ph),
-        )
+        return smooth_step_ref(self.rc, t)
 
 
-class Constant:
+class Constant(_Kernelled):
     def __init__(self, value: float):
         self.v = value
+        self.rc = REFERENCE.new(kind=REF_CONSTANT, v=value)
 
     def __call__(self, t: float) -> tuple[float, float, float]:
         return self.v, 0.0, 0.0
 
 
-class Ramp:
+class Ramp(_Kernelled):
     """start + slope·(t − t0), held after ``duration`` (0 = endless)."""
 
     def __init__(self, start: float, slope: float, duration: float = 0.0, t0: float = 0.0):
         self.r0, self.k, self.d, self.t0 = start, slope, duration, t0
+        self.rc = REFERENCE.new(kind=REF_RAMP, r0=start, k=slope, d=duration, t0=t0)
 
     def __call__(self, t: float) -> tuple[float, float, float]:
-        tau = t - self.t0
-        if tau <= 0.0:
-            return self.r0, 0.0, 0.0
-        if self.d > 0.0 and tau >= self.d:
-            return self.r0 + self.k * self.d, 0.0, 0.0
-        return self.r0 + self.k * tau, self.k, 0.0
+        return ramp_ref(self.rc, t)
 
 
 def _pchip_slopes(t: list[float], y: list[float]) -> list[float]:
@@ -140,7 +264,7 @@ def _pchip_slopes(t: list[float], y: list[float]) -> list[float]:
     return m
 
 
-class Waypoints:
+class Waypoints(_Kernelled):
     """Quintic Hermite through knots (t_i, r_i), C² (SI values)."""
 
     def __init__(self, t: list[float], r: list[float], t0: float = 0.0):
@@ -152,42 +276,11 @@ class Waypoints:
         for i in range(1, n - 1):
             a[i] = (v[i + 1] - v[i - 1]) / (self.t[i + 1] - self.t[i - 1])
         self.v, self.a = v, a
+        self.knots = [self.t, self.r, v, a]
+        self.rc = REFERENCE.new(kind=REF_WAYPOINTS, n=n)
 
     def __call__(self, t: float) -> tuple[float, float, float]:
-        ts = self.t
-        if t <= ts[0]:
-            return self.r[0], 0.0, 0.0
-        if t >= ts[-1]:
-            return self.r[-1], 0.0, 0.0
-        i = bisect.bisect_right(ts, t) - 1
-        h = ts[i + 1] - ts[i]
-        s = (t - ts[i]) / h
-        p0, p1 = self.r[i], self.r[i + 1]
-        v0, v1 = self.v[i] * h, self.v[i + 1] * h
-        a0, a1 = self.a[i] * h * h, self.a[i + 1] * h * h
-        s2, s3 = s * s, s * s * s
-        s4, s5 = s3 * s, s3 * s2
-        # quintic Hermite basis and its derivatives in s
-        h00 = 1 - 10 * s3 + 15 * s4 - 6 * s5
-        h10 = s - 6 * s3 + 8 * s4 - 3 * s5
-        h20 = 0.5 * (s2 - 3 * s3 + 3 * s4 - s5)
-        h01 = 10 * s3 - 15 * s4 + 6 * s5
-        h11 = -4 * s3 + 7 * s4 - 3 * s5
-        h21 = 0.5 * (s3 - 2 * s4 + s5)
-        d00 = -30 * s2 + 60 * s3 - 30 * s4
-        d10 = 1 - 18 * s2 + 32 * s3 - 15 * s4
-        d20 = 0.5 * (2 * s - 9 * s2 + 12 * s3 - 5 * s4)
-        d11 = -12 * s2 + 28 * s3 - 15 * s4
-        d21 = 0.5 * (3 * s2 - 8 * s3 + 5 * s4)
-        e00 = -60 * s + 180 * s2 - 120 * s3
-        e10 = -36 * s + 96 * s2 - 60 * s3
-        e20 = 0.5 * (2 - 18 * s + 36 * s2 - 20 * s3)
-        e11 = -24 * s + 84 * s2 - 60 * s3
-        e21 = 0.5 * (6 * s - 24 * s2 + 20 * s3)
-        r = h00 * p0 + h10 * v0 + h20 * a0 + h01 * p1 + h11 * v1 + h21 * a1
-        rd = d00 * p0 + d10 * v0 + d20 * a0 - d00 * p1 + d11 * v1 + d21 * a1
-        rdd = e00 * p0 + e10 * v0 + e20 * a0 - e00 * p1 + e11 * v1 + e21 * a1
-        return r, rd / h, rdd / (h * h)
+        return waypoints_ref(self.knots, self.rc.n, t)
 
 
 def _resolve(file: str) -> Path:
@@ -278,9 +371,11 @@ def _is_number(s: str) -> bool:
     return True
 
 
-def make_reference(p: ReferenceParams, axis: str, sample_time_s: float = 0.001) -> Reference:
-    """Build the reference of ``p`` (paper units) as an SI callable for ``axis``."""
-    u = 1.0 / axis_scale(axis)
+def make_reference(
+    p: ReferenceParams, axis: str, sample_time_s: float = 0.001, rotary_control: str = "speed"
+) -> Reference:
+    """Build the reference of ``p`` (paper units: mm, rpm or degrees) as an SI callable for ``axis``."""
+    u = 1.0 / axis_scale(axis, rotary_control)
     if p.kind == "sine":
         f_nyq = 0.5 / sample_time_s
         if not 0.0 < p.frequency_hz < f_nyq:

@@ -114,8 +114,8 @@ def run_compiled(
     p = packed
     t_wall = time.perf_counter()
     status, k_stop, last_event = closed_loop(
-        n, t_ns, st, prm, noise, out, p.active, p.cp, p.ci, p.cs, p.wp, p.vt, p.sup_on, p.sp,
-        p.si, (*sup_new(p.si), np.empty(4)), rec,
+        n, t_ns, st, prm, noise, out, p.axes, p.algs, p.sup_on, p.sp, p.si,
+        (*sup_new(p.si), np.empty(4)), rec,
     )  # fmt: skip
     wall = time.perf_counter() - t_wall
     if status != L.OK:

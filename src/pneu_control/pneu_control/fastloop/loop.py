@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 from numba import njit
+from pneu_msgs_py.params import records
 from pneu_sim.physics import kernel as plant_kernel
 from pneu_sim.physics.kernel import step_period
 
@@ -46,6 +47,7 @@ from pneu_control.fastloop.supervisor import (
     sup_command,
     sup_outputs,
 )
+from pneu_driver import safety
 
 __all__ = ["closed_loop", "refresh_cache"]
 
@@ -53,13 +55,14 @@ _NEUTRAL_V = 5.0  # pneu_msgs_py.contract.samples.NEUTRAL_V: inactive axes, star
 
 
 @njit(cache=True, nogil=True, **JIT)
-def closed_loop(
-    n, T_ns, st, prm, noise, out, active, cp, ci, cs, wp, vt, sup_on, sp, si, sup_state, rec
-):
+def closed_loop(n, T_ns, st, prm, noise, out, axes, algs, sup_on, sp, si, sup_state, rec):
     """Run n cycles from the plant state ``st`` whose sample s_0 is in ``out``.
 
     ``noise[k]``: the plant's noise row for step k (as :meth:`Plant.step` draws it).
-    ``active[a]``: axis a (0 linear, 1 rotary) has a controller. ``sup_state``: the
+    ``axes`` = (active, ac, ast, inp, rc, knots, codes, tables, uses_theta): per axis a (0
+    linear, 1 rotary) whether it has a controller, its axis constants and state, step
+    input, reference and knots, algorithm code and table (:mod:`.pack`); ``algs`` the
+    constants and state records of every compiled algorithm, per axis. ``sup_state``: the
     supervisor's fresh state (:func:`.supervisor.sup_new`) and 4 floats of scratch for
     the raw volts. ``rec`` float64[n, N_REC]: one row per cycle (layout: ``REC_*`` in
     :mod:`.layout`; the axis columns are written only for active axes).
@@ -75,9 +78,12 @@ def closed_loop(
     pa = sp[SP_P_A]
     vpm = sp[SP_V_PER_M]
     vmid = sp[SP_V_MID]
+    active, ac, ast, inp, rc, knots, codes, tables, uses_theta = axes
     # one view per axis, made once
-    cp0, ci0, cs0, wp0, vt0 = cp[0], ci[0], cs[0], wp[0], vt[0]
-    cp1, ci1, cs1, wp1, vt1 = cp[1], ci[1], cs[1], wp[1], vt[1]
+    ac0, ast0, inp0, rc0, kn0, tab0 = ac[0], ast[0], inp[0], rc[0], knots[0], tables[0]
+    ac1, ast1, inp1, rc1, kn1, tab1 = ac[1], ast[1], inp[1], rc[1], knots[1], tables[1]
+    code0, code1 = codes[0], codes[1]
+    th0, th1 = uses_theta[0], uses_theta[1]
     act0 = active[0]
     act1 = active[1]
     for k in range(n + 1):
@@ -121,7 +127,10 @@ def closed_loop(
         ans_l = hold_l
         ans_r = hold_r
         if act0:
-            u = axis_update(cp0, ci0, cs0, wp0, vt0, t, x, om, th, p1, p2, rec, k, REC_AXIS)
+            u = axis_update(
+                0, ac0, ast0, inp0, rc0, kn0, code0, algs, tab0, th0, t, x, om, th, p1, p2,
+                rec, k, REC_AXIS,
+            )  # fmt: skip
             if u != u:
                 return NONFINITE_COMMAND, k, last_event
             if sup_on:
@@ -132,8 +141,9 @@ def closed_loop(
             ans_l = u
         if act1:
             u = axis_update(
-                cp1, ci1, cs1, wp1, vt1, t, x, om, th, p1, p2, rec, k, REC_AXIS + N_REC_AXIS
-            )
+                1, ac1, ast1, inp1, rc1, kn1, code1, algs, tab1, th1, t, x, om, th, p1, p2,
+                rec, k, REC_AXIS + N_REC_AXIS,
+            )  # fmt: skip
             if u != u:
                 return NONFINITE_COMMAND, k, last_event
             if sup_on:
@@ -150,8 +160,18 @@ def closed_loop(
 
 
 def _sources() -> list[Path]:
+    """Every file the loop is compiled from: fastloop/, the kernels' modules, the plant."""
     here = Path(__file__).resolve().parent
-    return [*sorted(here.glob("*.py")), Path(plant_kernel.__file__).resolve()]
+    pkg = here.parent
+    kernels = [
+        *sorted((pkg / "algorithms").glob("*.py")),
+        *sorted((pkg / "observers").glob("*.py")),
+        pkg / "controller" / "axis.py",
+        pkg / "controller" / "references.py",
+        Path(records.__file__).resolve(),
+        *sorted(Path(safety.__file__).resolve().parent.glob("*.py")),
+    ]
+    return [*sorted(here.glob("*.py")), *kernels, Path(plant_kernel.__file__).resolve()]
 
 
 def refresh_cache() -> None:

@@ -10,6 +10,7 @@ import math
 __all__ = [
     "MM_PER_M",
     "RPM_PER_RAD_S",
+    "DEG_PER_RAD",
     "P_ATM_PA",
     "rpm_to_rad_s",
     "rad_s_to_rpm",
@@ -20,6 +21,7 @@ __all__ = [
 
 MM_PER_M = 1000.0
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)  # 1 rad/s = 9.549 rpm
+DEG_PER_RAD = 180.0 / math.pi  # rotary angle control: references and gains in degrees
 P_ATM_PA = 101325.0  # standard atmosphere, ISO 2533
 
 
