@@ -62,6 +62,11 @@ CASES = [
         RETUNED,
         {"eso_smc.friction_compensation": True, "rotary_model": "angle"},
     ),
+    ("pid", "rotary", PAPER, {"rotary_control": "angle"}),
+    ("ladrc", "rotary", RETUNED, {"rotary_control": "angle"}),
+    ("eso_smc", "rotary", PAPER, {"rotary_control": "angle"}),
+    ("coast", "rotary", PAPER, {"rotary_control": "angle"}),
+    ("coast", "rotary", RETUNED, {"rotary_control": "angle", "coast.overshoot": "hold"}),
     ("eso_smc_plus", "linear", PAPER, {}),  # position, friction feed-forward
     ("eso_smc_plus", "linear", PAPER, {"eso_smc_plus.friction_feedforward": False}),
     ("eso_smc_plus", "linear", PAPER, {**PLUS_DC}),
@@ -135,7 +140,9 @@ def _inputs(alg: KernelAlgorithm, params, axis: str, seed: int):
     d = params.transport_delay_samples
     u_n = params.limits.u_neutral
     linear = axis == "linear"
-    b, damp = (2400.0, 30.0) if linear else (2.3e6, 60.0)  # input gain, damping (1/s)
+    angle_ctl = (not linear) and params.rotary_control == "angle"  # y = θ in °
+    # input gain (mm/s²/V, °/s²/V, rpm/s²/V), damping (1/s)
+    b, damp = (2400.0, 30.0) if linear else ((2.0e5, 20.0) if angle_ctl else (2.3e6, 60.0))
     angle_in = (not linear) and params.rotary_model == "angle" and alg.uses_td
     inps = STEP_INPUT.array(N)
     kinds = np.zeros(N, dtype=np.int64)
@@ -156,11 +163,15 @@ def _inputs(alg: KernelAlgorithm, params, axis: str, seed: int):
             if t > 0.9:
                 r, r_dot, r_ddot = 55.0, 0.0, 0.0
             y = x + 0.05 * rng.standard_normal()  # laser noise
+        elif angle_ctl:  # target angles 180° -> 540° -> 300° (an overshoot for a one-way drive)
+            r = 180.0 if t <= 0.5 else (540.0 if t <= 1.0 else 300.0)
+            r_dot = r_ddot = 0.0
+            y = 0.09 * round(x / 0.09)  # encoder counts
         else:  # speed steps 800 -> 1500 -> 300 rpm
             r = 800.0 + (700.0 if t > 0.5 else 0.0) - (1200.0 if t > 1.0 else 0.0)
             r_dot = r_ddot = 0.0
             y = 15.0 * round(x / 15.0)  # quantised speed
-        th_r += T * (r if not linear else 0.0)
+        th_r += T * (0.0 if linear or angle_ctl else r)
         inp.y, inp.r, inp.r_dot, inp.r_ddot = y, r, r_dot, r_ddot
         if angle_in:  # the controller passes (θ, θ_r, ω_r, ω̇_r)
             inp.y, inp.r, inp.r_dot, inp.r_ddot = th, th_r, r, r_dot
@@ -201,6 +212,11 @@ def _assert_bits(a: np.ndarray, b: np.ndarray, what: str) -> None:
             assert np.all(same | nan), (what, name, np.argmin(same | nan))
         else:
             assert np.array_equal(x, y), (what, name)
+
+
+def test_every_kernel_algorithm_has_cases():
+    kernel_algorithms = {n for n, c in ALGORITHM_CLASSES.items() if issubclass(c, KernelAlgorithm)}
+    assert kernel_algorithms == {case[0] for case in CASES}
 
 
 @pytest.mark.parametrize("case", CASES, ids=_case_id)
