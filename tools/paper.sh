@@ -4,3 +4,4 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/bootstrap.sh
 .venv/bin/pneu paper --overwrite --out "${1:-out/paper}"  # regenerates: replaces its own outputs
+.venv/bin/python tools/results_doc.py "${1:-out/paper}/paper_table.md" docs/results.md  # the table, into the docs

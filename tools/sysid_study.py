@@ -5,7 +5,7 @@
 
 For each plant: excitation bags (seed 0 for identify, seed 1 held out), identify, validate, the
 recovered parameters against the truth and their stated tolerances. Writes <out>/<plant>/study.json
-and <out>/study.md (the tables the README quotes). The CI-fast version is test/control/sysid.
+and <out>/study.md (the tables docs/calibration.md quotes). The CI-fast version is test/control/sysid.
 """
 
 from __future__ import annotations

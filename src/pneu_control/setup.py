@@ -28,11 +28,10 @@ setup(
         "pneu_driver",
         "numpy>=1.26",
         "numba>=0.59",  # pneu_control.fastloop: the compiled closed loop
-        "scipy>=1.15",  # sweeps: qmc samplers (rng= keyword), rank correlation
+        "scipy>=1.15",  # sweeps: qmc (rng= keyword), rank correlation; identify: least_squares
         "distributed>=2024.8",  # pneu sweep --executor dask
         "PyYAML>=6.0",
         "matplotlib>=3.7",
-        "scipy>=1.11",  # pneu identify: least_squares
         "mcap-ros2-support>=0.5",  # pneu_control.experiment.fault_table checks bags with it
         "tqdm>=4.66",  # progress bars (cli/progress.py)
     ],

@@ -45,44 +45,7 @@ def _setup(arg: dict[str, str]) -> list:
     mode = arg["mode"] or ("lockstep" if sim else "realtime")
     lockstep = mode == "lockstep"
     duration = max(design_for(a, int(arg["seed"]), arg["level"]).duration_s for a in axes)
-    if sim:
-        driver = Node(
-            package="pneu_sim",
-            executable="sim_node",
-            name="pneu_sim",
-            output="screen",
-            parameters=[
-                {
-                    "mode": mode,
-                    "axes": arg["axes"],
-                    "duration_s": float(duration),
-                    "seed": int(arg["seed"]),
-                    "safety": True,
-                    "plant_file": arg["plant_file"] or os.path.join(config, "plant.yaml"),
-                    "safety_file": os.path.join(config, "safety.yaml"),
-                    # before sample 0: every sensor topic matched (the exciter and the
-                    # logger take all five) and the logger holding every node's parameters
-                    "startup.min_subscribers": 2,
-                    "startup.wait_for_logger": True,
-                }
-            ],
-            on_exit=[Shutdown(reason="excitation finished")],
-        )
-    else:
-        driver = Node(
-            package="pneu_driver",
-            executable="driver_node",
-            name="pneu_driver",
-            output="screen",
-            parameters=[
-                {
-                    "rig_file": arg["rig_file"] or os.path.join(config, "rig.yaml"),
-                    "safety_file": os.path.join(config, "safety.yaml"),
-                    "axes": arg["axes"],
-                }
-            ],
-            on_exit=[Shutdown(reason="driver stopped")],
-        )
+    driver = _driver(arg, config, mode, duration)
     exciter = Node(
         package="pneu_control",
         executable="exciter",
@@ -115,6 +78,48 @@ def _setup(arg: dict[str, str]) -> list:
         sigterm_timeout="15",  # the run's metadata is written at shutdown
     )
     return [driver, exciter, logger]
+
+
+def _driver(arg: dict[str, str], config: str, mode: str, duration: float):
+    """The node on the I/O side: the twin (target sim, ending the launch after ``duration``)
+    or the rig's driver."""
+    if arg["target"] == "sim":
+        return Node(
+            package="pneu_sim",
+            executable="sim_node",
+            name="pneu_sim",
+            output="screen",
+            parameters=[
+                {
+                    "mode": mode,
+                    "axes": arg["axes"],
+                    "duration_s": float(duration),
+                    "seed": int(arg["seed"]),
+                    "safety": True,
+                    "plant_file": arg["plant_file"] or os.path.join(config, "plant.yaml"),
+                    "safety_file": os.path.join(config, "safety.yaml"),
+                    # before sample 0: every sensor topic matched (the exciter and the
+                    # logger take all five) and the logger holding every node's parameters
+                    "startup.min_subscribers": 2,
+                    "startup.wait_for_logger": True,
+                }
+            ],
+            on_exit=[Shutdown(reason="excitation finished")],
+        )
+    return Node(
+        package="pneu_driver",
+        executable="driver_node",
+        name="pneu_driver",
+        output="screen",
+        parameters=[
+            {
+                "rig_file": arg["rig_file"] or os.path.join(config, "rig.yaml"),
+                "safety_file": os.path.join(config, "safety.yaml"),
+                "axes": arg["axes"],
+            }
+        ],
+        on_exit=[Shutdown(reason="driver stopped")],
+    )
 
 
 def generate_launch_description():

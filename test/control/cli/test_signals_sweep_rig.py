@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import signal
+import struct
 import time
 from pathlib import Path
 
@@ -60,7 +61,13 @@ def test_sweep_interrupted_stops_its_workers_and_writes_nothing(tmp_path, sig, g
     assert P.wait_for(lambda: len(_workers(proc.pid)) == 2, timeout=120)
     workers = _workers(proc.pid)
     everything = P.children(proc.pid)  # the workers and multiprocessing's resource tracker
-    time.sleep(1.0)  # the workers are running their first runs
+    # the workers are running their first runs: each has run its initializer (SIGINT
+    # ignored), loaded the compiled loop (llvmlite mapped), and computed for a CPU second since
+    assert P.wait_for(
+        lambda: all(P.ignores(w, signal.SIGINT) and P.maps(w, "llvmlite") for w in workers)
+    )
+    cpu0 = {w: P.cpu_s(w) for w in workers}
+    assert P.wait_for(lambda: all(P.cpu_s(w) >= cpu0[w] + 1.0 for w in workers))
     assert proc.poll() is None
     if group:
         os.killpg(proc.pid, sig)
@@ -72,6 +79,27 @@ def test_sweep_interrupted_stops_its_workers_and_writes_nothing(tmp_path, sig, g
     assert not any(P.alive(w) for w in workers), "a worker was left running"
     assert P.wait_for(lambda: not any(P.alive(c) for c in everything), timeout=10)
     assert not out.exists() or not any(out.iterdir())  # nothing written, not even a partial
+
+
+def _card_tick(card: Path) -> int:
+    """The simulated card's clock tick, read from its file as another process sees it
+    (0 before the card is powered up); opening it as a CardRegister could power it up."""
+    try:
+        data = card.read_bytes()
+    except OSError:
+        return 0
+    if len(data) != 64 or data[:8] != b"PNEUCARD":
+        return 0
+    return struct.unpack_from("<Q", data, 48)[0]
+
+
+def _rig(out: Path, card: Path) -> list[str]:
+    """``pneu rig`` on the simulated card whose state file is ``card``, into ``out``."""
+    return [
+        *(a if a != "sim:seed=1" else f"sim:seed=1,card={card}" for a in RIG),
+        "--out",
+        str(out),
+    ]
 
 
 def _rig_checks(out: Path, sig: int, err: str) -> dict:
@@ -103,10 +131,8 @@ def _rig_checks(out: Path, sig: int, err: str) -> dict:
 def test_rig_interrupted_in_the_loop_finishes_its_files(tmp_path, sig):
     out = tmp_path / "rig"
     card = tmp_path / "card"
-    proc = P.start(*[a if a != "sim:seed=1" else f"sim:seed=1,card={card}" for a in RIG],
-                   "--out", str(out))  # fmt: skip
-    assert P.wait_for(lambda: out.is_dir(), timeout=120)  # claimed: the loop is starting
-    time.sleep(0.5)
+    proc = P.start(*_rig(out, card))
+    assert P.wait_for(lambda: _card_tick(card) >= 200, timeout=120)  # the loop is running
     proc.send_signal(sig)
     rc, stdout, err = P.finish(proc)
     assert rc == 128 + sig, err
@@ -121,9 +147,9 @@ def test_rig_interrupted_in_the_loop_finishes_its_files(tmp_path, sig):
 
 def test_rig_second_signal_while_finishing_changes_nothing(tmp_path):
     out = tmp_path / "rig"
-    proc = P.start(*RIG, "--out", str(out))
-    assert P.wait_for(lambda: out.is_dir(), timeout=120)
-    time.sleep(1.0)
+    card = tmp_path / "card"
+    proc = P.start(*_rig(out, card))
+    assert P.wait_for(lambda: _card_tick(card) >= 1000, timeout=120)  # a second of the loop
     proc.send_signal(signal.SIGTERM)
     while proc.poll() is None:  # keep signalling while it writes the bag
         proc.send_signal(signal.SIGINT)

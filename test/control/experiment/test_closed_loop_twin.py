@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from pneu_control.analysis.metrics import WindowSpec
 from pneu_control.experiment import session
+from pneu_control.experiment.catalog import PAPER_CONTROLLERS
 from pneu_control.experiment.robustness import scaled_plant
 from pneu_control.experiment.runner import run
 from pneu_msgs_py.params.paths import config_file
 from pneu_sim.physics.plant_file import load_plant
 
-ALGORITHMS = ("pid", "ladrc", "eso_smc")
 CORNERS = [(1.0, 1.0), (0.7, 1.0), (1.3, 1.0), (1.0, 0.7), (1.0, 1.3)]
 
 
@@ -46,7 +46,7 @@ def _run(plant, axis, algorithm, mass=1.0, supply=1.0, seed=0):
     return res.metrics[axis], saturated
 
 
-@pytest.mark.parametrize("algorithm", ALGORITHMS)
+@pytest.mark.parametrize("algorithm", PAPER_CONTROLLERS)
 @pytest.mark.parametrize("mass,supply", CORNERS)
 def test_linear_stable_across_mass_and_supply(plant, algorithm, mass, supply):
     m, saturated = _run(plant, "linear", algorithm, mass, supply)
@@ -54,7 +54,7 @@ def test_linear_stable_across_mass_and_supply(plant, algorithm, mass, supply):
     assert m.e_max < 2.0 and m.rmse < 0.6  # mm: tracking, not a limit cycle (paper PID: 1.4)
 
 
-@pytest.mark.parametrize("algorithm", ALGORITHMS)
+@pytest.mark.parametrize("algorithm", PAPER_CONTROLLERS)
 @pytest.mark.parametrize("mass,supply", CORNERS)
 def test_rotary_stable_across_inertia_and_supply(plant, algorithm, mass, supply):
     m, saturated = _run(plant, "rotary", algorithm, mass, supply)

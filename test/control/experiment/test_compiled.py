@@ -13,6 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from pneu_control.controller.params import ALGORITHMS
 from pneu_control.experiment import compiled as compiled_mod
 from pneu_control.experiment.compiled import (
     CompiledLoopMismatch,
@@ -27,7 +28,6 @@ from pneu_msgs_py.params.paths import config_file
 
 PAPER = config_file("controllers.yaml")
 RETUNED = config_file("controllers_retuned.yaml")
-ALGORITHMS = ("pid", "ladrc", "eso_smc", "eso_smc_plus")
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -36,7 +36,7 @@ MIN_FIT = 90.0
 # the cylinder) the rod-side pressure fits 87 % held out. What limits it is not noise (its
 # ceiling is 96.7 %) but the supply: identified 2.9 % high (inside its 3 % tolerance), traded
 # against the two pressure sensors' common offset -- no segment vents a chamber to the
-# atmosphere, which would fix the offsets (see the README's identification results).
+# atmosphere, which would fix the offsets (see docs/calibration.md, the proof on known plants).
 MIN_FIT_EXCEPTIONS = {("inertia+breakaway+n1.35+absolute", "p_c2"): 85.0}
 SIGNALS = ("x", "p_c1", "p_c2", "p_m1", "omega")
 

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 import yaml
-from pneu_msgs_py.bag.cdr import fluid_pressure_layout, joint_state_layout
 from pneu_msgs_py.bag.schemas import MSG_DEFINITIONS, TYPE_HASHES
 from pneu_msgs_py.contract import qos as Q
+from pneu_msgs_py.contract.cdr import fluid_pressure_layout, joint_state_layout
 from pneu_msgs_py.contract.convert import (
     DiagStatus,
     command_from_msg,

@@ -49,12 +49,14 @@ class FaultInterval:
     cause: str
 
     def to_dict(self) -> dict[str, Any]:
+        """Plain data for JSON (an open end as ``None``)."""
         d = asdict(self)
         d["end_s"] = None if math.isinf(self.end_s) else self.end_s
         return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FaultInterval:
+        """The interval of :meth:`to_dict`'s output (``end_s`` None: open to the run's end)."""
         end = d.get("end_s")
         return cls(
             d["axis"],

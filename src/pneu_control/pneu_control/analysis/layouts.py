@@ -85,11 +85,13 @@ class Curve:
     joint: str | None = None
 
     def foxglove_path(self) -> str:
+        """The curve as a Foxglove message path (``topic.field[index]`` for a joint)."""
         if self.joint is None:
             return f"{self.topic}.{self.field}"
         return f"{self.topic}.{self.field}[{JOINT_NAMES[self.topic].index(self.joint)}]"
 
     def plotjuggler_name(self) -> str:
+        """The curve's series name in PlotJuggler (``topic/joint/field``)."""
         if self.joint is None:
             return f"{self.topic}/{self.field}"
         return f"{self.topic}/{self.joint}/{self.field}"
@@ -97,6 +99,8 @@ class Curve:
 
 @dataclass(frozen=True)
 class Plot:
+    """One panel of a layout: a title and the curves drawn in it."""
+
     key: str  # unique within a layout: panel ids, dock names
     title: str
     curves: tuple[Curve, ...]

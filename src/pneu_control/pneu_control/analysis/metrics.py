@@ -34,10 +34,14 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from pneu_msgs_py.contract.units import MM_PER_M, RPM_PER_RAD_S
 
+from pneu_control.analysis.fault_marks import exclusion_mask
+
 __all__ = [
+    "UNITS",
     "WINDOW_KINDS",
     "AxisMetrics",
     "WindowSpec",
+    "axis_metrics",
     "compute_metrics",
     "moving_average",
     "window_start",
@@ -45,7 +49,8 @@ __all__ = [
 
 WINDOW_KINDS = ("sine", "speed", "positioning", "fixed")
 
-_UNIT = {"linear": ("mm", MM_PER_M), "rotary": ("rpm", RPM_PER_RAD_S)}
+#: axis -> (report unit, factor from SI)
+UNITS = {"linear": ("mm", MM_PER_M), "rotary": ("rpm", RPM_PER_RAD_S)}
 
 
 @dataclass(frozen=True)
@@ -69,10 +74,12 @@ class WindowSpec:
             )
 
     def to_dict(self) -> dict:
+        """The window as plain data (metrics.json, the bag's ``pneu.run`` record)."""
         return asdict(self)
 
     @staticmethod
     def from_dict(d: dict) -> WindowSpec:
+        """The window of :meth:`to_dict`'s output."""
         return WindowSpec(**d)
 
 
@@ -115,6 +122,7 @@ class AxisMetrics:
 
     @property
     def window_s(self) -> list[float]:
+        """``[window start, window end]`` in s."""
         return [self.window_start_s, self.window_end_s]
 
     def why_empty(self) -> str:
@@ -149,6 +157,7 @@ class AxisMetrics:
         )
 
     def to_dict(self) -> dict:
+        """The metrics as plain data, with ``window_s``."""
         d = asdict(self)
         d["window_s"] = self.window_s
         return d
@@ -161,15 +170,17 @@ def compute_metrics(
     measured: np.ndarray,
     spec: WindowSpec,
     exclude: np.ndarray | None = None,
+    units: tuple[str, float] | None = None,
 ) -> AxisMetrics:
     """e_max and RMSE (Eq. 37) of ``reference − measured`` over the window.
 
-    Arrays are SI (m or rad/s) sampled at the control period. ``exclude`` is a
-    boolean mask of samples to leave out (e.g. fault intervals).
+    Arrays are SI (m, rad/s or rad) sampled at the control period. ``exclude`` is a
+    boolean mask of samples to leave out (e.g. fault intervals). ``units``: (unit,
+    scale) of the report (default the axis's: mm, rpm; ``ANGLE_UNITS`` for an angle).
     """
-    if axis not in _UNIT:
+    if axis not in UNITS:
         raise ValueError(f"axis: {axis!r} refused; allowed: linear, rotary")
-    unit, scale = _UNIT[axis]
+    unit, scale = UNITS[axis] if units is None else units
     t = np.asarray(t, dtype=float)
     reference = np.asarray(reference, dtype=float)
     measured = np.asarray(measured, dtype=float)
@@ -198,3 +209,14 @@ def compute_metrics(
         window_end_s=float(t1),
         n_samples=n,
     )
+
+
+def axis_metrics(axis, t, reference, measured, window, intervals, include_faults=False, units=None):
+    """DESIGN §7 metrics without the fault intervals (unless ``include_faults``) and non-finite samples."""
+    bad = ~(np.isfinite(measured) & np.isfinite(reference))
+    exclude = bad if bad.any() else None
+    if not include_faults and intervals:
+        fm = exclusion_mask(t, intervals, axis)
+        if fm is not None:
+            exclude = fm if exclude is None else (exclude | fm)
+    return compute_metrics(axis, t, reference, measured, window, exclude=exclude, units=units)

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from pneu_msgs_py.contract.units import MM_PER_M, RPM_PER_RAD_S
 
-__all__ = ["FORMATS", "Series", "plot_runs"]
+__all__ = ["FORMATS", "Series", "plot_runs", "pyplot"]
 
 _SCALE = {"linear": (MM_PER_M, "mm", "displacement"), "rotary": (RPM_PER_RAD_S, "rpm", "speed")}
 
@@ -31,7 +31,8 @@ class Series:
     window_s: tuple[float, float] | None = None
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib.pyplot on the non-interactive Agg backend (imported when a figure is drawn)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -56,7 +57,7 @@ def plot_runs(
     ``fmt`` (``png``, ``pdf``, ``svg``; default: from ``path``'s suffix) lets the
     figure be written under a temporary name.
     """
-    plt = _pyplot()
+    plt = pyplot()
     n = len(series)
     rows = 4 if pressures else 3
     fig, axs = plt.subplots(rows, n, figsize=(4.2 * n, 2.3 * rows), sharex="col", squeeze=False)

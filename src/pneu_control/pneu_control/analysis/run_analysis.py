@@ -37,13 +37,14 @@ from pneu_control.analysis.fault_marks import (
     parse_safety_status,
     safe_intervals,
 )
-from pneu_control.analysis.metrics import AxisMetrics, WindowSpec
-from pneu_control.experiment.bag_log import END_METADATA, FAULTS_METADATA, RUN_METADATA
+from pneu_control.analysis.metrics import AxisMetrics, WindowSpec, axis_metrics
+from pneu_control.analysis.records import END_METADATA, FAULTS_METADATA, RUN_METADATA
 
 __all__ = [
     "AxisTrace",
     "RunAnalysis",
     "analyze",
+    "axes_in",
     "axis_traces",
     "fault_intervals",
     "run_config",
@@ -72,6 +73,8 @@ class AxisTrace:
 
 @dataclass
 class RunAnalysis:
+    """What :func:`analyze` found in one bag: config echo, metrics and traces per axis, warnings."""
+
     path: str
     config: dict[str, Any]
     metrics: dict[str, AxisMetrics]
@@ -83,6 +86,7 @@ class RunAnalysis:
 
     @property
     def interrupted(self) -> bool:
+        """Did the run end on a signal (its ``pneu.end`` record says so)?"""
         return self.end.get("interrupted") == "true"
 
     def status_line(self) -> str:
@@ -102,6 +106,7 @@ class RunAnalysis:
         return ""
 
     def to_dict(self) -> dict[str, Any]:
+        """The analysis as plain data (``pneu analyze --json``); traces left out."""
         return {
             "path": self.path,
             "interrupted": self.interrupted,
@@ -137,7 +142,8 @@ def run_config(data: RunData) -> dict[str, Any]:
         return {}
 
 
-def _axes_in(data: RunData, config: dict[str, Any]) -> list[str]:
+def axes_in(data: RunData, config: dict[str, Any]) -> list[str]:
+    """The run's axes: the config echo's ``axes`` if intact, else those with a controller state."""
     axes = config.get("axes")
     if axes:
         if isinstance(axes, list) and all(a in CONTROLLER_STATE_TOPIC for a in axes):
@@ -244,11 +250,9 @@ def analyze(
     axis safe) are marked in :attr:`RunAnalysis.faults` and left out of the
     metrics unless ``include_faults``.
     """
-    from pneu_control.experiment.runner import axis_metrics
-
     data = read_run(path)
     config = run_config(data)
-    axes = axes or _axes_in(data, config)
+    axes = axes or axes_in(data, config)
     if not axes:
         raise MissingTopicError(path, _not_a_run(data))
     for axis in axes:
@@ -257,7 +261,7 @@ def analyze(
                 raise MissingTopicError(
                     path,
                     f"the {axis} axis has no {topic} messages to analyse "
-                    f"(axes recorded: {', '.join(_axes_in(data, {})) or 'none'})",
+                    f"(axes recorded: {', '.join(axes_in(data, {})) or 'none'})",
                 )
     traces = axis_traces(data, axes)
     t0_ns = min(

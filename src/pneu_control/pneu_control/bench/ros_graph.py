@@ -195,6 +195,7 @@ def _sim_running(out: Path) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``bench_ros``: launch the graph, measure it, print the figures; the exit code."""
     p = argparse.ArgumentParser(
         prog="ros2 run pneu_control bench_ros", description=__doc__.split("\n")[0]
     )

@@ -17,6 +17,8 @@ __all__ = ["sweep_runs_per_s"]
 def sweep_runs_per_s(
     runs: int | None = None, *, workers: int | None = None, executor: str = "local"
 ) -> dict[str, Any]:
+    """Sweep throughput: runs per wall-clock second of one small sweep (the sine experiment,
+    ESO-SMC, ``runs`` plant samples) on ``workers`` processes."""
     from pneu_control.experiment.catalog import experiment_by_id
     from pneu_control.sweep.engine import plan_sweep, run_sweep
     from pneu_control.sweep.executors import default_workers

@@ -16,6 +16,7 @@ HELP = "metrics (e_max, RMSE per axis, DESIGN §7) of a run bag (.mcap file or r
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu analyze`` options on ``p``."""
     p.add_argument("run", metavar="RUN", help=".mcap file or rosbag2 directory")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument(
@@ -39,6 +40,7 @@ def check_window_start(value: float | None) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu analyze``: print the metrics of the run (JSON with ``--json``); the exit code."""
     check_window_start(args.window_start)
     window = (
         None if args.window_start is None else WindowSpec(kind="fixed", t_start_s=args.window_start)

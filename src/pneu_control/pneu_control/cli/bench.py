@@ -40,6 +40,7 @@ FIGURES = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu bench`` options on ``p``."""
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument(
         "--only",
@@ -61,6 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def machine() -> dict[str, Any]:
+    """The machine the figures were taken on: CPU model, cores, Python, platform, load average."""
     cpu = platform.processor() or ""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -161,6 +163,8 @@ def _groups(quick: bool) -> dict[str, Callable[[], dict[str, Any]]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu bench``: run the benchmark groups, print their figures (JSON with ``--json``); the
+    exit code."""
     results: dict[str, Any] = {"machine": machine()}
     groups = _groups(args.quick)
     for name, fn in groups.items():

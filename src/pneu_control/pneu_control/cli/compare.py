@@ -18,6 +18,7 @@ HELP = "compare runs: one metrics table (markdown + JSON) and a figure with a co
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu compare`` options on ``p``."""
     p.add_argument("runs", nargs="+", metavar="RUN")
     p.add_argument(
         "--out",
@@ -32,6 +33,8 @@ ARTEFACTS = ("compare.md", "compare.json", "compare.png")
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu compare``: one metrics table across the runs (overlay plots with ``--out``); the exit
+    code."""
     claim = None
     if args.out:
         claim = OutputDir(args.out, ARTEFACTS, overwrite=args.overwrite, inputs=args.runs).check()

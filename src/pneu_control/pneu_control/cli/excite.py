@@ -21,6 +21,7 @@ HELP = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu excite`` options on ``p``."""
     p.add_argument("--axis", choices=("linear", "rotary", "both"), default="both")
     add_run_dir_arguments(p)
     p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
@@ -42,6 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu excite``: run the excitation design on the twin into a bag; the exit code."""
     from pneu_driver.safety import load_safety_params
     from pneu_msgs_py.lifecycle.duration import check_duration
     from pneu_sim.physics.plant_file import load_plant

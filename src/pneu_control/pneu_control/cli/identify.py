@@ -20,6 +20,7 @@ HELP = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu identify`` options on ``p``."""
     p.add_argument("bags", nargs="+", metavar="BAG", help=".mcap files or rosbag2 directories")
     p.add_argument(
         "--out",
@@ -42,7 +43,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 MAX_STEPS = 10_000  # bounded: each evaluation replays every bag
 
 
-def _resolve(bag: str) -> str:
+def resolve_bag(bag: str) -> str:
+    """``bag``, or the ``run.mcap`` inside it when it is an output directory of a run."""
     p = Path(bag)
     if p.is_dir() and not (p / "metadata.yaml").exists() and (p / "run.mcap").exists():
         return str(p / "run.mcap")  # an output directory of pneu excite / pneu run
@@ -50,6 +52,8 @@ def _resolve(bag: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu identify``: fit the plant to the bags, write the plant.yaml and its report; the exit
+    code."""
     from pneu_msgs_py.params.paths import config_file
     from pneu_msgs_py.params.yaml_file import from_option, load_yaml, located
     from pneu_sim.physics.plant_file import params_from_tree
@@ -61,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     # everything checked before anything is written: options, the output, the base file, bags
     if not 1 <= args.max_steps <= MAX_STEPS:
         raise ParamError("--max-steps", args.max_steps, f"an integer in [1, {MAX_STEPS}]")
-    bags = [_resolve(b) for b in args.bags]
+    bags = [resolve_bag(b) for b in args.bags]
     base_path = Path(args.base) if args.base else config_file("plant.yaml")
     out_claims = output_claims(args.out, overwrite=args.overwrite, inputs=[*bags, base_path])
     with from_option("--base" if args.base else None):

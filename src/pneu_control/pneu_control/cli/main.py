@@ -27,6 +27,7 @@ __all__ = ["main", "SUBCOMMANDS"]
 SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("sim", "pneu_sim.cli.sim"),
     ("run", "pneu_control.cli.run"),
+    ("task", "pneu_control.cli.task"),
     ("rig", "pneu_control.cli.rig"),
     ("paper", "pneu_control.cli.paper"),
     ("sweep", "pneu_control.cli.sweep"),
@@ -70,6 +71,7 @@ def _available() -> list[tuple[str, object]]:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``pneu`` parser with one subcommand per module of :data:`SUBCOMMANDS`."""
     parser = _Parser(
         prog="pneu",
         description="pneu: servo stack for a linear-rotary pneumatic actuator (twin, controllers, bags).",
@@ -93,7 +95,7 @@ def _one_line(text: str) -> str:
 
 
 def main(argv: list[str] | None = None, *, restore_signals: bool = True) -> int:
-    """Run one subcommand; return its exit code (README: 0, 1, 2, 3, 129, 130, 143).
+    """Run one subcommand; return its exit code (docs/cli.md: 0, 1, 2, 3, 129, 130, 143).
 
     ``restore_signals`` False (the ``pneu`` process itself): after the command, signals
     stay recorded-only, so one arriving while the interpreter shuts down changes nothing.

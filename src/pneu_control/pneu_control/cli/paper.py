@@ -27,6 +27,7 @@ HELP = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu paper`` options on ``p``."""
     p.add_argument(
         "--out",
         required=True,
@@ -77,7 +78,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _series(result, exp: Experiment, label: str, m) -> Series:
-    from pneu_control.experiment.runner import _MEASURED
+    from pneu_control.experiment.runner import MEASURED
 
     cols = result.axes[exp.axis]
     return Series(
@@ -85,7 +86,7 @@ def _series(result, exp: Experiment, label: str, m) -> Series:
         axis=exp.axis,
         t=result.t,
         reference=cols["reference"],
-        measured=result.samples[_MEASURED[exp.axis]],
+        measured=result.samples[MEASURED[exp.axis]],
         u=cols["u"],
         window_s=(m.window_start_s, m.window_end_s),
     )
@@ -101,6 +102,7 @@ def _artefacts(experiments, uncertainty: int = 0) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu paper``: every experiment, the table and the figures into ``--out``; the exit code."""
     from pneu_sim.physics.plant_file import load_plant
 
     # everything checked before anything is written
@@ -142,16 +144,19 @@ def _run(args, claim: OutputDir, plant, cfg: Path, experiments) -> int:
     def plant_for(gains: str):
         return plant_abs if gains == paper.ABSOLUTE_SUPPLY_SET else plant
 
-    def runner(exp: Experiment, controller: str, gains: str, run_dir: Path):
-        spec = session.build_spec(
+    def options(exp: Experiment, controller: str, gains: str) -> session.RunOptions:
+        return session.RunOptions(
             axes=(exp.axis,),
             controller=controller,
             reference=dict(exp.reference),
             duration_s=exp.duration_s,
-            seed=args.seed,
             controllers_file=cfg / paper.GAIN_SETS[gains],
             plant=plant_for(gains),
-            name=f"{exp.id}/{controller}/{gains}",
+        )
+
+    def runner(exp: Experiment, controller: str, gains: str, run_dir: Path):
+        spec = session.build_spec(
+            options(exp, controller, gains), seed=args.seed, name=f"{exp.id}/{controller}/{gains}"
         )
         spec = _with_window(spec, exp)
         result = session.execute(spec, run_dir, bag=True, overwrite=args.overwrite)
@@ -164,15 +169,7 @@ def _run(args, claim: OutputDir, plant, cfg: Path, experiments) -> int:
     def seed_runner(exp: Experiment, controller: str, gains: str, seed: int):
         from pneu_control.experiment.runner import run as run_spec
 
-        spec = session.build_spec(
-            axes=(exp.axis,),
-            controller=controller,
-            reference=dict(exp.reference),
-            duration_s=exp.duration_s,
-            seed=seed,
-            controllers_file=cfg / paper.GAIN_SETS[gains],
-            plant=plant_for(gains),
-        )
+        spec = session.build_spec(options(exp, controller, gains), seed=seed)
         result = run_spec(_with_window(spec, exp))
         if result.interrupted:
             raise signals.Interrupted(signals.pending() or signal.SIGINT)
@@ -198,23 +195,7 @@ def _run(args, claim: OutputDir, plant, cfg: Path, experiments) -> int:
     if args.uncertainty:
         band_md = _uncertainty(args, rows, experiments, cfg, out)
     if not args.no_plots:
-        for exp in experiments:
-            for gains in paper.PAPER_GAIN_SETS:
-                keys = [
-                    (exp.id, c, g)
-                    for c, g in paper.runs_for(exp)
-                    if (g == gains)
-                    or (gains == "retuned" and g == "design")
-                    or (gains == "paper" and g == paper.ABSOLUTE_SUPPLY_SET)
-                ]
-                series = [
-                    _series(results[k][0], exp, f"{k[1]} ({k[2]} gains)", results[k][1])
-                    for k in keys
-                ]
-                name = f"{exp.id}__{gains}.png"
-                with signals.deferred():
-                    plot_runs(series, f"{exp.title}: {gains} gains", claim.partial(name), fmt="png")
-                    claim.publish(name)
+        _figures(claim, experiments, results)
     print()
     print(paper.render_markdown(rows))
     if band_md:
@@ -225,6 +206,26 @@ def _run(args, claim: OutputDir, plant, cfg: Path, experiments) -> int:
         file=sys.stderr,
     )
     return 0
+
+
+def _figures(claim: OutputDir, experiments, results) -> None:
+    """One figure per experiment and gain set (``EXP__GAINS.png``): the runs beside each other."""
+    for exp in experiments:
+        for gains in paper.PAPER_GAIN_SETS:
+            keys = [
+                (exp.id, c, g)
+                for c, g in paper.runs_for(exp)
+                if (g == gains)
+                or (gains == "retuned" and g == "design")
+                or (gains == "paper" and g == paper.ABSOLUTE_SUPPLY_SET)
+            ]
+            series = [
+                _series(results[k][0], exp, f"{k[1]} ({k[2]} gains)", results[k][1]) for k in keys
+            ]
+            name = f"{exp.id}__{gains}.png"
+            with signals.deferred():
+                plot_runs(series, f"{exp.title}: {gains} gains", claim.partial(name), fmt="png")
+                claim.publish(name)
 
 
 def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:

@@ -16,6 +16,7 @@ HELP = "paper-style figure of a run bag: reference vs measured, error, valve vol
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu plot`` options on ``p``."""
     p.add_argument("run", metavar="RUN", help=".mcap file or rosbag2 directory")
     p.add_argument(
         "--out",
@@ -27,6 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def series_of(res, label_prefix: str = "") -> list[Series]:
+    """One plot series per axis of an analysed run (``res``: a :class:`RunAnalysis`)."""
     out = []
     for axis, tr in res.traces.items():
         m = res.metrics[axis]
@@ -46,6 +48,7 @@ def series_of(res, label_prefix: str = "") -> list[Series]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu plot``: the figure of a recorded run; the exit code."""
     src = Path(args.run)
     out = Path(args.out) if args.out else src.with_suffix(".png") if src.suffix else src / "run.png"
     claim = OutputFile(out, overwrite=args.overwrite, inputs=[src], suffixes=FORMATS).check()

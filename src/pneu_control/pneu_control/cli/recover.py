@@ -15,12 +15,14 @@ HELP = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu recover`` options on ``p``."""
     p.add_argument("bag", metavar="BAG", help=".mcap file (or .mcap.partial, rosbag2 directory)")
     p.add_argument("--out", required=True, metavar="NEW.mcap", help="the recovered bag (new)")
     p.add_argument("--overwrite", action="store_true", help="replace NEW.mcap if it exists")
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu recover``: write the recovered bag; the exit code."""
     claim = OutputFile(args.out, overwrite=args.overwrite, inputs=[args.bag]).check()
     with claim:
         rep = recover(args.bag, claim.path)

@@ -18,6 +18,7 @@ HELP = "feed a bag's recorded sensor stream through a controller core offline (O
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu replay`` options on ``p``."""
     p.add_argument("run", metavar="RUN", help=".mcap file or rosbag2 directory")
     p.add_argument("--controller", default=None, help="algorithm (default: the one recorded)")
     p.add_argument(
@@ -38,6 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu replay``: the recorded sensors through a controller core into a new bag (its commands
+    and estimates); the exit code."""
     axes = None
     if args.axis:
         axes = ["linear", "rotary"] if args.axis == "both" else [args.axis]

@@ -20,6 +20,7 @@ HELP = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu rig`` options on ``p``."""
     p.add_argument(
         "--backend",
         required=True,
@@ -81,6 +82,8 @@ def parse_hold(text: str) -> dict[str, float]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu rig``: the controllers in the driver's loop on ``--backend`` until the duration or a
+    signal; the exit code."""
     from pneu_driver.daq.rig import load_rig_params
 
     from pneu_control.experiment.rig_run import rig_dir, run_rig

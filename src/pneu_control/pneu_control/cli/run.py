@@ -32,6 +32,7 @@ def add_run_dir_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu run`` options on ``p``."""
     p.add_argument("--axis", choices=("linear", "rotary", "both"), default="linear")
     p.add_argument(
         "--controller",
@@ -95,13 +96,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu run``: one experiment on the twin into ``--out`` (bag, metrics, time series); the exit
+    code."""
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
     # everything is checked before anything is written: the output first (cheap), then
     # every file and option, the references against the rig's limits, the faults
     claim = session.run_dir(
         args.out, overwrite=args.overwrite, inputs=(args.plant, args.controllers, args.safety)
     ).check()
-    spec = session.build_spec(
+    options = session.RunOptions(
         axes=axes,
         controller=args.controller,
         reference=args.reference,
@@ -117,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
         safety_file=args.safety,
         include_faults=args.include_faults,
     )
+    spec = session.build_spec(options)
     live = live_options.open_live(args, axes=axes, kind=args.axis)
     try:
         result = session.execute(spec, claim, bag=not args.no_bag, progress=True, live=live)

@@ -49,6 +49,7 @@ MAX_WORKERS = 1024
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu sweep`` options on ``p``."""
     p.add_argument(
         "--out",
         required=True,
@@ -138,6 +139,7 @@ def run_plan(plan, args: argparse.Namespace, desc: str, label: str):
 
 
 def check_executor_args(args: argparse.Namespace) -> None:
+    """Refuse ``--address`` without the dask executor and ``--workers`` out of range."""
     if args.address is not None and args.executor != "dask":
         raise ParamError("--address", args.address, "with --executor dask")
     if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
@@ -145,6 +147,8 @@ def check_executor_args(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu sweep``: plan the sweep, run it, write the table, summary and figures; the exit
+    code."""
     from pneu_control.sweep.engine import custom_experiment, plan_sweep
     from pneu_control.sweep.report import sweep_artefacts, write_sweep
 

@@ -18,6 +18,7 @@ HELP = "replay bags through a twin (open loop on the recorded voltages, or close
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``pneu validate`` options on ``p``."""
     p.add_argument("bags", nargs="+", metavar="BAG")
     p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
     p.add_argument("--mode", choices=("open", "closed", "auto"), default="open",
@@ -61,9 +62,11 @@ def _figure(i: int, bag: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``pneu validate``: replay each bag through the twin, write the report and overlays; the exit
+    code."""
     from pneu_sim.physics.plant_file import load_plant
 
-    from pneu_control.cli.identify import _resolve
+    from pneu_control.cli.identify import resolve_bag
     from pneu_control.sysid.record import load_record
     from pneu_control.sysid.validate import plot_validation, validate_record, write_report
 
@@ -72,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         raise ParamError("--horizon", args.horizon, "> 0 s (inf: never restart)")
     if args.min_fit is not None and not math.isfinite(args.min_fit):
         raise ParamError("--min-fit", args.min_fit, "a finite percentage (fits are <= 100 %)")
-    bags = [_resolve(b) for b in args.bags]
+    bags = [resolve_bag(b) for b in args.bags]
     claim = None
     if args.out:
         names = ["validate.json", *(_figure(i, b) for i, b in enumerate(bags))]

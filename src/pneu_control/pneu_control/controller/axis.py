@@ -365,6 +365,23 @@ class AxisController:
             )
         self._pending = self._build(params)
 
+    def set_reference(self, ref: Any) -> None:
+        """Follow ``ref`` from the next update on: a callable t -> (r, ṙ, r̈) in SI (m, rad/s
+        or rad), t on this controller's time base (s since its first sample).
+
+        The algorithm keeps running (no restart, no blending): a new setpoint or
+        trajectory, as a task or a joint trajectory gives it. The TD, when on, tracks it
+        from where it is.
+        """
+        if not callable(ref):
+            raise ParamError("reference", type(ref).__name__, "a callable t -> (r, r_dot, r_ddot)")
+        self._ref = ref
+
+    @property
+    def time_s(self) -> float:
+        """The time of the last update on this controller's time base (s)."""
+        return self._t
+
     def reset(self) -> None:
         """Forget all dynamic state; the next update is a cold start (t = 0 at its stamp)."""
         if self._pending is not None:

@@ -9,6 +9,14 @@ from typing import Any
 
 from pneu_msgs_py.bag import BagWriter
 
+from pneu_control.analysis.records import (
+    END_METADATA,
+    EXCITE_METADATA,
+    FAULTS_METADATA,
+    INTERVALS_METADATA,
+    RUN_METADATA,
+    SAFETY_METADATA,
+)
 from pneu_control.controller.axis import STATE_FIELDS
 
 __all__ = [
@@ -21,13 +29,6 @@ __all__ = [
     "intervals_metadata",
     "open_run_bag",
 ]
-
-RUN_METADATA = "pneu.run"  # metadata record holding the run's full config
-SAFETY_METADATA = "pneu.safety"  # supervisor on/off, its thresholds, allow_unsafe
-FAULTS_METADATA = "pneu.faults"  # the injected faults (written at the start)
-INTERVALS_METADATA = "pneu.fault_intervals"  # injected + safe intervals (written at the end)
-EXCITE_METADATA = "pneu.excite"  # excitation design per axis (pneu_control.sysid)
-END_METADATA = "pneu.end"  # how the run ended: completed / interrupted (signal, time) / failed
 
 
 def end_metadata(end: dict[str, Any]) -> dict[str, str]:
@@ -109,6 +110,8 @@ def run_metadata(echo: dict[str, Any]) -> dict[str, dict[str, str]]:
 
 
 def open_run_bag(path: str | Path, spec: Any, echo: dict[str, Any]) -> BagWriter:
+    """A :class:`BagWriter` at ``path`` for an in-process run, with the run's metadata
+    (``echo``)."""
     return BagWriter(
         path,
         metadata=run_metadata(echo),

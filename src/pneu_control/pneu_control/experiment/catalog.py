@@ -11,11 +11,15 @@ from dataclasses import dataclass, field
 
 from pneu_control.analysis.metrics import WindowSpec
 
-__all__ = ["PAPER_EXPERIMENTS", "Experiment", "experiment_by_id"]
+__all__ = ["PAPER_CONTROLLERS", "PAPER_EXPERIMENTS", "Experiment", "experiment_by_id"]
+
+PAPER_CONTROLLERS = ("pid", "ladrc", "eso_smc")  # the controllers the paper compares
 
 
 @dataclass(frozen=True)
 class Experiment:
+    """One of the paper's experiments: reference, duration, window, the paper's figures."""
+
     id: str
     axis: str  # "linear" | "rotary"
     title: str
@@ -44,7 +48,7 @@ PAPER_EXPERIMENTS: tuple[Experiment, ...] = (
         },
         duration_s=20.0,
         window=WindowSpec(kind="sine", frequency_hz=0.25),
-        controllers=("pid", "ladrc", "eso_smc"),
+        controllers=PAPER_CONTROLLERS,
         unit="mm",
         paper={"pid": (1.4, 0.441), "ladrc": (0.8, 0.398), "eso_smc": (0.44, 0.176)},
     ),
@@ -55,7 +59,7 @@ PAPER_EXPERIMENTS: tuple[Experiment, ...] = (
         reference={"reference.kind": "constant", "reference.value": 800.0},
         duration_s=10.0,
         window=WindowSpec(kind="speed", average_s=60.0 / 800.0),  # one revolution
-        controllers=("pid", "ladrc", "eso_smc"),
+        controllers=PAPER_CONTROLLERS,
         unit="rpm",
         paper={"pid": (15.0, None), "ladrc": (2.5, None), "eso_smc": (2.0, None)},
     ),
@@ -92,6 +96,8 @@ PAPER_EXPERIMENTS: tuple[Experiment, ...] = (
 
 
 def experiment_by_id(exp_id: str, field: str = "--only") -> Experiment:
+    """The experiment called ``exp_id``; a :class:`ParamError` on ``field`` naming the known
+    ones."""
     for exp in PAPER_EXPERIMENTS:
         if exp.id == exp_id:
             return exp

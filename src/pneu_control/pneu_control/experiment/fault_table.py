@@ -50,6 +50,9 @@ RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 
 @dataclass(frozen=True)
 class Scenario:
+    """One fault table row's set-up: the fault (as ``pneu run --fault`` takes it), the axes, the
+    duration."""
+
     fault: str  # NAME[:k=v,...] as pneu run --fault takes it
     axes: tuple[str, ...]
     duration_s: float = 3.0
@@ -77,6 +80,9 @@ SCENARIOS: tuple[Scenario, ...] = (
 
 @dataclass
 class FaultRow:
+    """One row of the fault table: which rule caught the fault, how fast, how far the axis went, the
+    end state."""
+
     fault: str
     axes: str  # axes the fault acts on
     rule: str  # the latching (ERROR) rule that caught it ('' if none)
@@ -97,6 +103,7 @@ class FaultRow:
     bag: Path | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The row as plain data (the bag as a string; the RunResult left out)."""
         d = asdict(self)
         d.pop("result")
         d["bag"] = str(self.bag) if self.bag else None
@@ -262,6 +269,8 @@ def run_all(
     scenarios: tuple[Scenario, ...] = SCENARIOS,
     controllers_file: str | Path | None = None,
 ) -> list[FaultRow]:
+    """Every scenario, with and without the supervisor, each into its own directory under
+    ``out_dir`` (a temporary one if None)."""
     out = Path(out_dir) if out_dir else Path(tempfile.mkdtemp(prefix="pneu-faults-"))
     return [
         run_scenario(sc, out / f"{i:02d}_{sc.fault.partition(':')[0]}", controllers_file)
@@ -307,6 +316,7 @@ def to_markdown(rows: list[FaultRow]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Print the fault table of every scenario (argument: the output directory); the exit code."""
     argv = sys.argv[1:] if argv is None else argv
     rows = run_all(argv[0] if argv else None)
     print(to_markdown(rows))

@@ -19,7 +19,15 @@ from pneu_control.analysis.metrics import AxisMetrics
 from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, Experiment
 from pneu_control.experiment.runner import RunResult
 
-__all__ = ["IMPROVED", "PaperRow", "paper_rows", "render_markdown", "run_paper"]
+__all__ = [
+    "IMPROVED",
+    "PaperRow",
+    "first_trip",
+    "in_band",
+    "paper_rows",
+    "render_markdown",
+    "run_paper",
+]
 
 # our controller beyond the paper, run on the experiments it is compared on, with its
 # design-rule gains from controllers.yaml (gain set "design")
@@ -54,6 +62,9 @@ def absolute_supply_plant(plant):
 
 @dataclass(frozen=True)
 class PaperRow:
+    """One row of the paper table: our e_max and RMSE beside the paper's, with the run's window and
+    seeds."""
+
     id: str
     axis: str
     controller: str
@@ -78,6 +89,7 @@ class PaperRow:
     rmse_raw: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The row as plain data, with the ratios to the paper's figures."""
         d = dict(self.__dict__)
         d["ratio_e_max"] = _ratio(self.e_max, self.paper_e_max)
         d["ratio_rmse"] = _ratio(self.rmse, self.paper_rmse)
@@ -91,6 +103,7 @@ def _ratio(ours: float, paper: float | None) -> float | None:
 
 
 def run_dir_name(exp: Experiment, controller: str, gains: str) -> str:
+    """The run's directory name: ``EXPERIMENT__CONTROLLER__GAINS``."""
     return f"{exp.id}__{controller}__{gains}"
 
 
@@ -103,7 +116,7 @@ def runs_for(exp: Experiment) -> list[tuple[str, str]]:
     return pairs
 
 
-def _first_trip(result: RunResult, axis: str) -> str | None:
+def first_trip(result: RunResult, axis: str) -> str | None:
     """The supervisor's first ERROR on ``axis`` ("overspeed at 0.412 s"), if any."""
     for ev in result.safety_events:
         if ev.level == "ERROR" and ev.axis in (axis, "all"):
@@ -120,6 +133,7 @@ def row_from_metrics(
     band_ok=None,
     safety_trip: str | None = None,
 ):
+    """The :class:`PaperRow` of one run's metrics, with the paper's figures for that controller."""
     paper = exp.paper.get(controller, (None, None))
     return PaperRow(
         id=exp.id,
@@ -157,8 +171,8 @@ def run_paper(
             result, m = runner(exp, controller, gains, run_dir)
             band_ok = None
             if exp.band is not None and math.isfinite(m.e_max):
-                band_ok = _in_band(result, exp, m)
-            trip = _first_trip(result, exp.axis)
+                band_ok = in_band(result, exp, m)
+            trip = first_trip(result, exp.axis)
             row = row_from_metrics(exp, controller, gains, m, run_dir.name, band_ok, trip)
             if exp.window.average_s > 0.0 and math.isfinite(m.e_max):
                 raw = raw_metrics(result, exp, m)
@@ -186,23 +200,23 @@ def run_paper(
 def raw_metrics(result: RunResult, exp: Experiment, m: AxisMetrics) -> AxisMetrics:
     """``m``'s window on the unaveraged measurement (the raw encoder speed): the
     one-revolution mean hides what a low-bandwidth controller leaves in the speed."""
-    from pneu_control.analysis.metrics import WindowSpec
-    from pneu_control.experiment.runner import _MEASURED, axis_metrics
+    from pneu_control.analysis.metrics import WindowSpec, axis_metrics
+    from pneu_control.experiment.runner import MEASURED
 
     w = WindowSpec(kind="fixed", t_start_s=m.window_start_s, t_end_s=m.window_end_s)
     cols = result.axes[exp.axis]
-    y = result.samples[_MEASURED[exp.axis]]
+    y = result.samples[MEASURED[exp.axis]]
     return axis_metrics(exp.axis, result.t, cols["reference"], y, w, result.fault_intervals)
 
 
-def _in_band(result: RunResult, exp: Experiment, m: AxisMetrics) -> bool:
+def in_band(result: RunResult, exp: Experiment, m: AxisMetrics) -> bool:
     """Does the (averaged) measured speed stay inside the paper's band in the window?"""
     import numpy as np
 
     from pneu_control.analysis.metrics import moving_average
-    from pneu_control.experiment.runner import _MEASURED
+    from pneu_control.experiment.runner import MEASURED
 
-    y = result.samples[_MEASURED[exp.axis]]
+    y = result.samples[MEASURED[exp.axis]]
     n_avg = max(1, int(round(exp.window.average_s / float(result.t[1] - result.t[0]))))
     y = moving_average(y, n_avg) * (60.0 / (2.0 * math.pi))
     mask = (result.t >= m.window_start_s) & (result.t <= m.window_end_s)
@@ -225,6 +239,7 @@ def _spread(mean: float | None, worst: float | None, n: int) -> str:
 
 
 def render_markdown(rows: list[PaperRow]) -> str:
+    """The rows as the Markdown table of paper_table.md."""
     lines = [
         "| experiment | controller | gains | e_max | paper e_max | ratio | RMSE | paper RMSE | ratio "
         "| e_max mean / worst over seeds | RMSE mean / worst | raw speed e_max / RMSE | window (s) |",
@@ -251,6 +266,8 @@ def render_markdown(rows: list[PaperRow]) -> str:
 def write_table(
     rows: list[PaperRow], out_dir: str | Path, extra: dict[str, Any] | None = None
 ) -> None:
+    """paper_table.json (rows and ``extra``) and paper_table.md into ``out_dir``, each renamed when
+    complete."""
     out = Path(out_dir)
     doc = {"experiments": [r.to_dict() for r in rows]}
     if extra:
@@ -264,4 +281,5 @@ def write_table(
 
 
 def paper_rows(path: str | Path) -> list[dict[str, Any]]:
+    """The rows of a paper_table.json, as plain dicts."""
     return json.loads(Path(path).read_text())["experiments"]

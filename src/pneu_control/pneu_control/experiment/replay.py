@@ -22,7 +22,7 @@ from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.contract.topics import JOINT_STATE_TOPIC, PRESSURE_TOPICS, ROTARY_COUNTS_JOINT
 from pneu_msgs_py.params.core import ParamError, from_dict
 
-from pneu_control.analysis.run_analysis import _axes_in, run_config
+from pneu_control.analysis.run_analysis import axes_in, run_config
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
 from pneu_control.controller.params import AxisControllerParams, load_controller_params
 from pneu_control.experiment.bag_log import RUN_METADATA
@@ -107,7 +107,7 @@ def replay(
 
     data = read_run(run)
     config = run_config(data)
-    axes = axes or _axes_in(data, config) or ["linear"]
+    axes = axes or axes_in(data, config) or ["linear"]
     if JOINT_STATE_TOPIC["linear"] not in data.topics:
         raise MissingTopicError(
             run, f"replay needs {JOINT_STATE_TOPIC['linear']} (the sample clock)"

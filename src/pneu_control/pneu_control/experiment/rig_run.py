@@ -20,7 +20,7 @@ SIGTERM and SIGHUP stop the loop (the main thread polls
 the valves safe) and the files are then finished inside
 :func:`~pneu_msgs_py.lifecycle.signals.deferred`, marked interrupted: a second
 signal cannot cut them. A killed process leaves no bag (and, on the rig, the
-valves as they were: README, "Safety on the real rig").
+valves as they were: docs/rig.md, "Safety on the real rig").
 """
 
 from __future__ import annotations
@@ -51,6 +51,9 @@ NODE = "pneu_rig"
 
 @dataclass
 class RigRunResult:
+    """What a rig run left: the loop's statistics and diagnostics, its error, the cycles logged, the
+    bag."""
+
     stats: LoopStats
     diagnostics: dict[str, str]  # the loop's /diagnostics key-values at the end
     error: BaseException | None
@@ -60,9 +63,11 @@ class RigRunResult:
 
     @property
     def interrupted(self) -> bool:
+        """Did a signal (or Ctrl-C) end the run?"""
         return bool(self.end.get("interrupted"))
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as plain data (loop.json)."""
         return {
             "loop": self.diagnostics,
             "error": None if self.error is None else str(self.error),
@@ -101,30 +106,9 @@ def run_rig(
         claim.check()
     daq = make_backend(backend, rig)  # a bad backend spec is refused here, before any file
     sup = SafetySupervisor(spec.safety, sample_time_s=rig.period_s)
-    ctrls = [(a, AxisController(a, spec.controllers[a])) for a in spec.axes if a not in hold]
-    held = tuple(hold.items())
     cycles: list[tuple[Any, list[tuple[str, float, tuple[float, ...], str]]]] = []
     events: list[Any] = []
-    loop: DriverLoop
-
-    def on_sample(s: Any) -> None:
-        answers = []
-        for axis, u in held:
-            loop.put_command(axis, u, s.stamp_ns)
-        for axis, c in ctrls:
-            u = c.update(s)
-            loop.put_command(axis, u, s.stamp_ns)
-            answers.append((axis, u, c.state_values(), c.algorithm))
-        cycles.append((s, answers))
-
-    loop = DriverLoop(
-        daq,
-        rig,
-        sup,
-        on_sample=on_sample,
-        on_events=events.extend,
-        expected_axes=tuple(dict.fromkeys((*spec.axes, *hold))),
-    )
+    loop = _controlled_loop(daq, rig, sup, spec, hold, cycles, events)
     n = None if duration_s is None else max(1, round(duration_s * rig.loop.rate_hz))
     stats_marks: list[tuple[int, dict[str, str]]] = []
 
@@ -149,9 +133,7 @@ def run_rig(
             elif claim is not None:
                 bag_path = claim.final("run.mcap")
                 _write_bag(bag_path, cycles, events, stats_marks, diag, echo or {}, end)
-                doc = {"loop": diag, "error": str(loop.error or ""), "end": end}
-                claim.partial("loop.json").write_text(json.dumps(doc, indent=2) + "\n")
-                claim.publish("loop.json")
+                _write_loop_json(claim, diag, loop.error, end)
         except BaseException:
             if claim is not None:
                 claim.discard()
@@ -160,6 +142,43 @@ def run_rig(
             if claim is not None:
                 claim.__exit__(None, None, None)
     return RigRunResult(loop.stats, diag, loop.error, len(cycles), bag_path, end)
+
+
+def _controlled_loop(
+    daq: Any, rig: Any, sup: Any, spec: Any, hold: dict[str, float], cycles: list, events: list
+) -> DriverLoop:
+    """The driver loop whose sample callback runs ``spec``'s controllers (and the held axes'
+    constant commands) and records each cycle's answers into ``cycles``."""
+    ctrls = [(a, AxisController(a, spec.controllers[a])) for a in spec.axes if a not in hold]
+    held = tuple(hold.items())
+    loop: DriverLoop
+
+    def on_sample(s: Any) -> None:
+        answers = []
+        for axis, u in held:
+            loop.put_command(axis, u, s.stamp_ns)
+        for axis, c in ctrls:
+            u = c.update(s)
+            loop.put_command(axis, u, s.stamp_ns)
+            answers.append((axis, u, c.state_values(), c.algorithm))
+        cycles.append((s, answers))
+
+    loop = DriverLoop(
+        daq,
+        rig,
+        sup,
+        on_sample=on_sample,
+        on_events=events.extend,
+        expected_axes=tuple(dict.fromkeys((*spec.axes, *hold))),
+    )
+    return loop
+
+
+def _write_loop_json(claim: OutputDir, diag: Any, error: Any, end: dict[str, Any]) -> None:
+    """``loop.json``: the loop's diagnostics, its error ("" if none) and the end record."""
+    doc = {"loop": diag, "error": str(error or ""), "end": end}
+    claim.partial("loop.json").write_text(json.dumps(doc, indent=2) + "\n")
+    claim.publish("loop.json")
 
 
 def _run_loop(loop: DriverLoop, target: Any, stop: Any, stats_marks: list) -> bool:

@@ -31,13 +31,31 @@ from pneu_msgs_py.lifecycle.duration import check_duration
 from pneu_sim.cycle.rig_cycle import RigCycle
 from pneu_sim.physics.plant import Plant
 
-from pneu_control.analysis.metrics import AxisMetrics, WindowSpec, compute_metrics
+from pneu_control.analysis.metrics import AxisMetrics, WindowSpec, axis_metrics
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
 
-__all__ = ["SAMPLE_FIELDS", "RunResult", "RunSpec", "result_of", "run"]
+__all__ = [
+    "ANGLE_UNITS",
+    "MEASURED",
+    "SAMPLE_FIELDS",
+    "measured_of",
+    "RunResult",
+    "RunSpec",
+    "result_of",
+    "run",
+]
 
 SAMPLE_FIELDS = ("p_c1", "p_c2", "p_m1", "x", "theta", "omega", "counts")
-_MEASURED = {"linear": "x", "rotary": "omega"}
+#: axis -> the sample field its metrics are taken on (rotary angle control: see measured_of)
+MEASURED = {"linear": "x", "rotary": "omega"}
+ANGLE_UNITS = ("°", 180.0 / math.pi)  # rotary_control: angle reports in degrees
+
+
+def measured_of(axis: str, params: Any) -> tuple[str, tuple[str, float] | None]:
+    """(sample field, report units or None for the axis's own) of what ``params`` controls."""
+    if axis == "rotary" and getattr(params, "rotary_control", "speed") == "angle":
+        return "theta", ANGLE_UNITS
+    return MEASURED[axis], None
 
 
 def _default_safety() -> Any:
@@ -102,6 +120,7 @@ class RunResult:
         return simulated / self.wall_s if self.wall_s > 0 else math.inf
 
     def metrics_dict(self) -> dict[str, Any]:
+        """The metrics of each axis as plain data."""
         return {axis: m.to_dict() for axis, m in self.metrics.items()}
 
     def save(self, out_dir: str | Path, config_echo: dict[str, Any] | None = None) -> Path:
@@ -144,7 +163,7 @@ class _Rows:
     """Rows of floats recorded per cycle into an array preallocated for the whole run.
 
     Rows are gathered in a short list and copied in blocks (a numpy row write
-    per cycle costs ten times a list append), so memory is the array plus one
+    per cycle costs far more than a list append), so memory is the array plus one
     block, and :meth:`rows` always returns whole rows only.
     """
 
@@ -195,8 +214,13 @@ def run(
     *,
     bag: Any | None = None,
     progress: Callable[[float], None] | None = None,
+    hook: Callable[[int, Any, RigCycle, dict[str, Any]], bool] | None = None,
 ) -> RunResult:
     """Run ``spec`` in lockstep. ``bag``: an open ``BagWriter`` to log into.
+
+    ``hook(k, s_k, cycle, controllers)``: called at the start of every cycle, before
+    the controllers answer s_k (a task switches references and loads there); True
+    ends the run after the cycles so far (a task that finished or aborted).
 
     With ``spec.safety`` (the default) every command passes through a
     :class:`pneu_driver.safety.supervisor.SafetySupervisor` before it reaches the plant,
@@ -220,16 +244,6 @@ def run(
     period = plant.T
     n = int(round(spec.duration_s / period))
     ctrls = {axis: _controller(axis, spec.controllers[axis], period) for axis in spec.axes}
-    # per cycle: (stamp, SAMPLE_FIELDS...); per axis: (STATE_FIELDS..., u); what the DAQ held
-    rec_samples = _Rows(n, 1 + len(SAMPLE_FIELDS))
-    rec_axis = {axis: _Rows(n, len(STATE_FIELDS) + 1) for axis in ctrls}
-    # (axis, core, its records), fixed order
-    active = [(axis, ctrls[axis], rec_axis[axis].append) for axis in AXES if axis in ctrls]
-    rec_out = _Rows(n, 2)  # what the DAQ held during each step
-    algorithms = {axis: c.algorithm for axis, c in ctrls.items()}
-    nan_row = (math.nan,) * (len(STATE_FIELDS) + 1)
-    sig = signals.STATE
-
     sup = None
     if spec.safety is not None:
         from pneu_driver.safety import SafetySupervisor
@@ -238,13 +252,50 @@ def run(
     cycle = RigCycle(
         plant, axes=spec.axes, x0=spec.x0, supervisor=sup, faults=spec.faults, seed=spec.seed
     )
-    faulty = cycle.injector is not None
-    rec_truth = _Rows(n if faulty else 0, 2)  # (x, omega) true, only with faults
-    events_all: list[Any] = []
-    crashed: dict[str, str] = {}
+    rec = _Recording(n, ctrls, faulty=cycle.injector is not None)
+    algorithms = {axis: c.algorithm for axis, c in ctrls.items()}  # as the run starts
+    t_wall = time.perf_counter()
+    m, interrupted = _cycles(cycle, ctrls, rec, n, bag, progress, hook)
+    wall = time.perf_counter() - t_wall
+    t, samples, axes, held, truth = rec.arrays(m)
+    return result_of(
+        spec,
+        t,
+        samples,
+        axes,
+        held,
+        rec.events,
+        dict(sup.counters) if sup is not None else {},
+        period,
+        wall,
+        interrupted=interrupted,
+        truth=truth,
+        algorithms=algorithms,
+    )
 
-    def controller_failed(axis: str, err: BaseException, stamp: int) -> None:
-        crashed[axis] = f"{type(err).__name__}: {err}"
+
+class _Recording:
+    """What :func:`run` records per cycle, preallocated for its ``n`` cycles."""
+
+    def __init__(self, n: int, ctrls: dict[str, Any], faulty: bool) -> None:
+        # per cycle: (stamp, SAMPLE_FIELDS...); per axis: (STATE_FIELDS..., u); what the DAQ held
+        self.samples = _Rows(n, 1 + len(SAMPLE_FIELDS))
+        self.axis = {axis: _Rows(n, len(STATE_FIELDS) + 1) for axis in ctrls}
+        self.out = _Rows(n, 2)  # what the DAQ held during each step
+        self.faulty = faulty
+        self.truth = _Rows(n if faulty else 0, 2)  # (x, omega) true, only with faults
+        self.events: list[Any] = []  # SafetyEvent, in order
+        self.crashed: dict[str, str] = {}  # axis -> the exception its controller raised
+
+    def flush(self) -> None:
+        """Copy the gathered rows of every recorder into its array."""
+        for r in (self.samples, self.out, self.truth, *self.axis.values()):
+            r.flush()
+
+    def controller_failed(self, axis: str, err: BaseException, stamp: int, bag: Any) -> None:
+        """``axis``'s controller raised ``err``: crashed from now on, an ERROR event (and
+        its ``/diagnostics`` in ``bag``)."""
+        self.crashed[axis] = f"{type(err).__name__}: {err}"
         from pneu_driver.safety import ERROR, SafetyEvent
 
         ev = SafetyEvent(
@@ -252,24 +303,63 @@ def run(
             axis,
             "controller_exception",
             ERROR,
-            f"{axis} controller raised {crashed[axis]}; treated as crashed (no more commands)",
+            f"{axis} controller raised {self.crashed[axis]}; treated as crashed (no more commands)",
             (("exception", type(err).__name__),),
         )
-        events_all.append(ev)
+        self.events.append(ev)
         if bag is not None:
             bag.write_diagnostics(stamp, _diag([ev]))
 
+    def arrays(self, m: int) -> tuple[np.ndarray, dict, dict, np.ndarray, dict[str, np.ndarray]]:
+        """(t, samples, axes, held, truth) of the first ``m`` cycles that were recorded whole."""
+        # whole cycles only (an exception between two records of a cycle drops that cycle)
+        m = min(m, len(self.samples), len(self.out), *(len(r) for r in self.axis.values()))
+        srows = self.samples.rows(m)
+        t = srows[:, 0].astype(np.int64) * 1e-9
+        samples = {name: srows[:, 1 + i].copy() for i, name in enumerate(SAMPLE_FIELDS)}
+        axes: dict[str, dict[str, np.ndarray]] = {}
+        for axis, rows in self.axis.items():
+            block = rows.rows(m)
+            cols = {name: block[:, i].copy() for i, name in enumerate(STATE_FIELDS)}
+            cols["u"] = block[:, len(STATE_FIELDS)].copy()
+            axes[axis] = cols
+        held = self.out.rows(m)
+        truth = {}
+        if self.faulty and m:
+            tr = self.truth.rows(min(m, len(self.truth)))
+            truth = {"x": tr[:, 0].copy(), "omega": tr[:, 1].copy()}
+        return t, samples, axes, held, truth
+
+
+def _cycles(
+    cycle: RigCycle,
+    ctrls: dict[str, Any],
+    rec: _Recording,
+    n: int,
+    bag: Any | None,
+    progress: Callable[[float], None] | None,
+    hook: Callable[..., bool] | None = None,
+) -> tuple[int, bool]:
+    """Up to ``n`` cycles of :func:`run` (its docstring gives the order within one):
+    (cycles recorded completely, interrupted?)."""
+    plant, sup = cycle.plant, cycle.supervisor
+    period = plant.T
+    # (axis, core, its records), fixed order
+    active = [(axis, ctrls[axis], rec.axis[axis].append) for axis in AXES if axis in ctrls]
+    nan_row = (math.nan,) * (len(STATE_FIELDS) + 1)
+    sig = signals.STATE
+    faulty, crashed = rec.faulty, rec.crashed
     s = cycle.reset()
     interrupted = False
     report_every = max(1, int(round(1.0 / period)))  # once per simulated second
-    t_wall = time.perf_counter()
     m = 0  # cycles recorded completely
-    append_sample, append_out, append_truth = rec_samples.append, rec_out.append, rec_truth.append
-    recorders = [rec_samples, rec_out, rec_truth, *rec_axis.values()]
+    append_sample, append_out, append_truth = rec.samples.append, rec.out.append, rec.truth.append
     try:
         for k in range(n):
             if sig.pending is not None:  # SIGINT/SIGTERM/SIGHUP under signals.deferred()
                 interrupted = True
+                break
+            if hook is not None and hook(k, s, cycle, ctrls):
                 break
             stamp = s.stamp_ns
             if faulty:
@@ -283,7 +373,7 @@ def run(
                     try:
                         u = ctrl.update(s)
                     except Exception as err:  # a crashed controller must not stop the rig
-                        controller_failed(axis, err, stamp)
+                        rec.controller_failed(axis, err, stamp, bag)
                 if u is None:  # silent or crashed: no command this cycle
                     append_axis(nan_row)
                 else:
@@ -297,14 +387,13 @@ def run(
             if sup is not None:
                 events = sup.events()
                 if events:
-                    events_all.extend(events)
+                    rec.events.extend(events)
                     if bag is not None:
                         bag.write_diagnostics(stamp, _diag(events))
             append_out(cycle.held_pair)
             m = k + 1
             if not m % _Rows.BLOCK:
-                for r in recorders:
-                    r.flush()
+                rec.flush()
             s = cycle.advance()  # tick k -> k+1 under u_{k-1}
             if progress is not None and k % report_every == 0:
                 progress(k * period)
@@ -312,38 +401,7 @@ def run(
         if isinstance(err, signals.Interrupted) and sig.defer == 0:
             raise  # the caller did not defer signals (tune, paper's extra seeds): it stops too
         interrupted = True
-    wall = time.perf_counter() - t_wall
-
-    # whole cycles only (an exception between two records of a cycle drops that cycle)
-    m = min(m, len(rec_samples), len(rec_out), *(len(r) for r in rec_axis.values()))
-    srows = rec_samples.rows(m)
-    t = srows[:, 0].astype(np.int64) * 1e-9
-    samples = {name: srows[:, 1 + i].copy() for i, name in enumerate(SAMPLE_FIELDS)}
-    axes: dict[str, dict[str, np.ndarray]] = {}
-    for axis in ctrls:
-        block = rec_axis[axis].rows(m)
-        cols = {name: block[:, i].copy() for i, name in enumerate(STATE_FIELDS)}
-        cols["u"] = block[:, len(STATE_FIELDS)].copy()
-        axes[axis] = cols
-    out = rec_out.rows(m)
-    truth = {}
-    if faulty and m:
-        tr = rec_truth.rows(min(m, len(rec_truth)))
-        truth = {"x": tr[:, 0].copy(), "omega": tr[:, 1].copy()}
-    return result_of(
-        spec,
-        t,
-        samples,
-        axes,
-        out,
-        events_all,
-        dict(sup.counters) if sup is not None else {},
-        period,
-        wall,
-        interrupted=interrupted,
-        truth=truth,
-        algorithms=algorithms,
-    )
+    return m, interrupted
 
 
 def result_of(
@@ -369,17 +427,20 @@ def result_of(
     metrics: dict[str, AxisMetrics] = {}
     for axis, cols in axes.items():
         window = spec.windows.get(axis, WindowSpec(kind="fixed"))
-        measured = samples[_MEASURED[axis]]
+        name, units = measured_of(axis, spec.controllers[axis])
         if m > 1:
             metrics[axis] = axis_metrics(
-                axis, t, cols["reference"], measured, window, faults, spec.include_faults
-            )
+                axis, t, cols["reference"], samples[name], window, faults, spec.include_faults,
+                units,
+            )  # fmt: skip
     return RunResult(
         spec,
         t,
         samples,
         axes,
-        algorithms or {axis: spec.controllers[axis].algorithm for axis in axes},
+        algorithms
+        if algorithms is not None
+        else {axis: spec.controllers[axis].algorithm for axis in axes},
         metrics,
         wall_s,
         interrupted,
@@ -406,16 +467,3 @@ def fault_intervals_of(spec: RunSpec, events: list[Any], period_s: float) -> lis
     out = injected_intervals([f.to_dict() for f in spec.faults], spec.axes, period_s)
     out += safe_intervals((e.stamp_ns, e.axis, e.rule, e.level, e.message) for e in events)
     return out
-
-
-def axis_metrics(axis, t, reference, measured, window, intervals, include_faults=False):
-    """DESIGN §7 metrics without the fault intervals (unless ``include_faults``) and non-finite samples."""
-    from pneu_control.analysis.fault_marks import exclusion_mask
-
-    bad = ~(np.isfinite(measured) & np.isfinite(reference))
-    exclude = bad if bad.any() else None
-    if not include_faults and intervals:
-        fm = exclusion_mask(t, intervals, axis)
-        if fm is not None:
-            exclude = fm if exclude is None else (exclude | fm)
-    return compute_metrics(axis, t, reference, measured, window, exclude=exclude)

@@ -6,9 +6,11 @@ point resolves config files, overrides and steady-state windows the same way.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +28,7 @@ from pneu_control.experiment.runner import RunResult, RunSpec, run
 
 __all__ = [
     "RUN_ARTEFACTS",
+    "RunOptions",
     "build_spec",
     "check_seed",
     "execute",
@@ -93,29 +96,39 @@ def window_for(axis: str, reference: Any, window_start_s: float | None = None) -
     return WindowSpec(kind="fixed", t_start_s=1.0)
 
 
-def build_spec(
-    *,
-    axes: tuple[str, ...],
-    controller: str | None = None,
-    reference: str | dict[str, Any] | None = None,
-    sets: Iterable[str] = (),
-    duration_s: float = 20.0,
-    seed: int = 0,
-    plant_file: str | Path | None = None,
-    controllers_file: str | Path | None = None,
-    window_start_s: float | None = None,
-    faults: Iterable[Any] = (),
-    name: str = "run",
-    plant: Any | None = None,
-    safety: bool | Any = True,
-    safety_file: str | Path | None = None,
-    include_faults: bool = False,
-) -> RunSpec:
-    """A validated :class:`RunSpec` from user-level options (nothing half-applied).
+@dataclass(frozen=True)
+class RunOptions:
+    """The user-level options of one run, as ``pneu run`` takes them: :func:`build_spec`
+    checks them and turns them into a :class:`RunSpec`.
 
-    ``faults``: ``NAME[:k=v,...]`` strings, dicts or :class:`pneu_sim.faults.injection.FaultSpec`.
-    ``safety``: True (default) = the supervisor with ``safety_file`` (default
-    ``config/safety.yaml``); False = no supervisor; or a ``SafetyParams``.
+    One definition for every entry point (``pneu run``/``rig``, the paper table,
+    sweeps, tuning, benchmarks): a caller fills the fields it has and
+    :func:`dataclasses.replace` varies them per run.
+    """
+
+    axes: tuple[str, ...]
+    controller: str | None = None  # algorithm on every axis (None: each axis's from the file)
+    reference: str | dict[str, Any] | None = None  # "KIND:k=v,..." or dotted reference.* values
+    sets: Iterable[str] = ()  # --set KEY=VALUE overrides (see parse_sets)
+    duration_s: float = 20.0
+    seed: int = 0
+    plant_file: str | Path | None = None  # None: config/plant.yaml
+    controllers_file: str | Path | None = None  # None: config/controllers.yaml
+    window_start_s: float | None = None  # None: the reference kind's window (window_for)
+    faults: Iterable[Any] = ()  # NAME[:k=v,...] strings, dicts or FaultSpec
+    name: str = "run"
+    plant: Any | None = None  # PlantParams, used instead of plant_file
+    safety: bool | Any = True  # True: the supervisor of safety_file; False: none; or SafetyParams
+    safety_file: str | Path | None = None  # None: config/safety.yaml
+    include_faults: bool = False  # metrics over the fault intervals too
+
+
+def build_spec(options: RunOptions | None = None, /, **fields: Any) -> RunSpec:
+    """A validated :class:`RunSpec` from :class:`RunOptions` (nothing half-applied).
+
+    ``build_spec(options)``, ``build_spec(axes=..., ...)`` (the fields of
+    :class:`RunOptions`) or ``build_spec(options, seed=3)`` (``options`` with
+    those fields replaced).
 
     Everything is checked here, before anything is written: every file and
     option, the references against the stroke and speed limits and the faults
@@ -124,61 +137,78 @@ def build_spec(
     from pneu_sim.faults.injection import parse_faults
     from pneu_sim.physics.plant_file import load_plant
 
-    from pneu_control.controller.params import ALGORITHMS
     from pneu_control.experiment.checks import check_faults, check_references
 
-    duration_s = check_duration(duration_s, "--duration")
-    if controller is not None and controller not in ALGORITHMS:
-        raise ParamError("--controller", controller, "one of " + ", ".join(ALGORITHMS))
-    seed = check_seed(seed)
-    if window_start_s is not None and not (
-        isinstance(window_start_s, (int, float)) and 0.0 <= window_start_s < duration_s
-    ):
-        raise ParamError("--window-start", window_start_s, f"[0, {duration_s:g}) s: inside the run")
-    with from_option("--plant" if plant_file else None):
-        plant_params = plant if plant is not None else load_plant(plant_file)
-    per_axis = parse_sets(sets, axes)
-    ref = reference if isinstance(reference, dict) else parse_reference(reference)
-    controllers: dict[str, Any] = {}
-    windows: dict[str, WindowSpec] = {}
-    for axis in axes:
-        overrides: dict[str, Any] = dict(ref)
-        if controller:
-            overrides["algorithm"] = controller
-        overrides.update(per_axis[axis])
-        with from_option("--controllers" if controllers_file else None):
-            load_controller_params(axis, controllers_file)  # the file's errors, located in it
-        try:
-            params = load_controller_params(axis, controllers_file, overrides)
-        except ParamError as err:  # an override's: named with its axis
-            raise ParamError(f"{axis}.{err.key}", err.value, err.allowed) from None
-        controllers[axis] = params
-        windows[axis] = window_for(axis, params.reference, window_start_s)
-    fault_specs = parse_faults(faults)
-    if safety is True:
-        from pneu_driver.safety import load_safety_params
-
-        with from_option("--safety" if safety_file else None):
-            safety_params = load_safety_params(safety_file)
-    elif safety is False or safety is None:
-        safety_params = None
-    else:
-        safety_params = safety
-    check_faults(fault_specs, axes, duration_s)
+    o = RunOptions(**fields) if options is None else dataclasses.replace(options, **fields)
+    duration_s = _check_options(o)
+    with from_option("--plant" if o.plant_file else None):
+        plant_params = o.plant if o.plant is not None else load_plant(o.plant_file)
+    controllers, windows = _controllers(o)
+    fault_specs = parse_faults(o.faults)
+    safety_params = _safety_params(o)
+    check_faults(fault_specs, o.axes, duration_s)
     spec = RunSpec(
-        axes=axes,
+        axes=o.axes,
         controllers=controllers,
         plant=plant_params,
         duration_s=duration_s,
-        seed=seed,
+        seed=o.seed,
         windows=windows,
-        name=name,
+        name=o.name,
         faults=fault_specs,
         safety=safety_params,
-        include_faults=include_faults,
+        include_faults=o.include_faults,
     )
-    check_references(spec, "--reference" if reference else None)
+    check_references(spec, "--reference" if o.reference else None)
     return spec
+
+
+def _check_options(o: RunOptions) -> float:
+    """The checked duration; refuses a bad controller, seed or window start."""
+    from pneu_control.controller.params import ALGORITHMS
+
+    duration_s = check_duration(o.duration_s, "--duration")
+    if o.controller is not None and o.controller not in ALGORITHMS:
+        raise ParamError("--controller", o.controller, "one of " + ", ".join(ALGORITHMS))
+    check_seed(o.seed)
+    w = o.window_start_s
+    if w is not None and not (isinstance(w, (int, float)) and 0.0 <= w < duration_s):
+        raise ParamError("--window-start", w, f"[0, {duration_s:g}) s: inside the run")
+    return duration_s
+
+
+def _controllers(o: RunOptions) -> tuple[dict[str, Any], dict[str, WindowSpec]]:
+    """Each axis's controller parameters (file, then reference, algorithm and --set) and window."""
+    per_axis = parse_sets(o.sets, o.axes)
+    ref = o.reference if isinstance(o.reference, dict) else parse_reference(o.reference)
+    controllers: dict[str, Any] = {}
+    windows: dict[str, WindowSpec] = {}
+    for axis in o.axes:
+        overrides: dict[str, Any] = dict(ref)
+        if o.controller:
+            overrides["algorithm"] = o.controller
+        overrides.update(per_axis[axis])
+        with from_option("--controllers" if o.controllers_file else None):
+            load_controller_params(axis, o.controllers_file)  # the file's errors, located in it
+        try:
+            params = load_controller_params(axis, o.controllers_file, overrides)
+        except ParamError as err:  # an override's: named with its axis
+            raise ParamError(f"{axis}.{err.key}", err.value, err.allowed) from None
+        controllers[axis] = params
+        windows[axis] = window_for(axis, params.reference, o.window_start_s)
+    return controllers, windows
+
+
+def _safety_params(o: RunOptions) -> Any:
+    """The supervisor's parameters of the run (None: no supervisor)."""
+    if o.safety is True:
+        from pneu_driver.safety import load_safety_params
+
+        with from_option("--safety" if o.safety_file else None):
+            return load_safety_params(o.safety_file)
+    if o.safety is False or o.safety is None:
+        return None
+    return o.safety
 
 
 def config_echo(spec: RunSpec) -> dict[str, Any]:
@@ -254,6 +284,7 @@ def execute(
     overwrite: bool = False,
     live: Any | None = None,
     echo_overrides: dict[str, Any] | None = None,
+    hook: Any | None = None,
 ) -> RunResult:
     """Run ``spec``; write ``metrics.json``, ``timeseries.npz`` and (``bag``) the MCAP bag.
 
@@ -268,6 +299,7 @@ def execute(
     ``live``: a :class:`pneu_msgs_py.live.server.LiveServer` that gets every cycle
     too (after the bag); the caller closes it. ``echo_overrides`` replace entries of
     the recorded config (e.g. a blind identification study hides the twin's parameters).
+    ``hook``: the runner's per-cycle hook (:func:`pneu_control.experiment.runner.run`).
     """
     claim = (
         out_dir
@@ -285,7 +317,7 @@ def execute(
 
                 writer = open_run_bag(claim.final(bag_name), spec, echo)
             sink = writer if live is None else (live if writer is None else Tee(writer, live))
-            result = run(spec, bag=sink, progress=report)
+            result = run(spec, bag=sink, progress=report, hook=hook)
             if result.interrupted and len(result.t) == 0:
                 raise signals.Interrupted(signals.pending() or 2)
         except BaseException as err:

@@ -58,6 +58,8 @@ __all__ = [
 
 @dataclass(frozen=True)
 class TuningExperiment:
+    """An experiment gains are tuned on (not one of the paper's): axis, reference, duration."""
+
     axis: str
     reference: dict[str, Any]
     duration_s: float

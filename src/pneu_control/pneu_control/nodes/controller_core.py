@@ -98,6 +98,8 @@ class TickDecoder:
         self.n_ticks = 0
 
     def on_raw(self, topic: str, data: bytes) -> SensorSample | None:
+        """One sensor payload in; the :class:`SensorSample` when its tick is complete, else None (a
+        malformed payload counts in ``n_bad``)."""
         try:
             stamp, fields = self.sensors.decode(topic, data)
         except ValueError:
@@ -146,6 +148,7 @@ class ControllerShellCore:
 
     @property
     def params(self) -> Any:
+        """The controller's current parameter set."""
         return self.controller.params
 
     def set_params(self, params: Any) -> None:

@@ -73,6 +73,8 @@ def make_nodes(args=None) -> list:
 
 
 def main(args=None) -> int:
+    """``controller_manager``: the loop's node and the active axes' hosted controllers in one
+    process; the exit code."""
     return run_node("controller_manager", lambda: make_nodes(args), args)
 
 

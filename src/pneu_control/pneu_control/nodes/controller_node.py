@@ -58,10 +58,48 @@ STATE_RATE_AUTO_HZ = {"lockstep": 0.0, "realtime": 100.0}
 
 
 class ControllerNode(ShellDefaults, Node):
+    """One axis's controller as an rclpy node; ``hosted``: the driver's loop calls :meth:`compute`
+    (no sensor subscriptions)."""
+
     def __init__(self, axis: str, hosted: bool = False, **node_kwargs):
         super().__init__(f"{axis}_controller", **node_kwargs)
         self.axis = axis
         self.hosted = hosted
+        self._declare_shell_parameters()
+        mode = self.get_parameter("mode").value
+        if mode not in ("lockstep", "realtime"):
+            raise ParamError("mode", mode, "one of lockstep, realtime")
+        rate = self.get_parameter("state_rate_hz").value or STATE_RATE_AUTO_HZ[mode]
+        base = load_controller_params(axis, self.get_parameter("controllers_file").value or None)
+        decls = declarations(base, ParameterDescriptor, FloatingPointRange, IntegerRange)
+        self.declare_parameters("", decls)
+        ok, reason, params = validate_updates(
+            base, [(n, self.get_parameter(n).value) for n, _, _ in decls], startup=True
+        )
+        if not ok:
+            raise ValueError(reason)
+        self.specs = specs_by_name(params)
+        self.params = params  # the newest accepted set
+        every = max(1, round(1.0 / (rate * params.sample_time_s))) if rate else 1
+        self.core = ControllerShellCore(axis, params, state_every=every)
+        self.add_pre_set_parameters_callback(self._coerce)
+        self.add_on_set_parameters_callback(self._validate)
+        self.add_post_set_parameters_callback(self._apply)
+
+        self._create_topics(mode, hosted)
+        # diagnostics at 1 Hz of wall time (steady clock): works whether /clock runs or not,
+        # and with executors whose timers do not follow sim time; stamps use the node clock
+        self.create_timer(
+            1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME)
+        )
+        self.get_logger().info(
+            f"{axis} controller ({params.algorithm}), {mode} QoS, "
+            + ("hosted by the 1 kHz loop" if hosted else f"inputs {', '.join(self.core.topics)}")
+            + f", state every {every} tick(s)"
+        )
+
+    def _declare_shell_parameters(self) -> None:
+        """controllers_file, mode, state_rate_hz: read-only, read once at start."""
         ro = {"read_only": True}
         self.declare_parameter(
             "controllers_file",
@@ -90,26 +128,10 @@ class ControllerNode(ShellDefaults, Node):
                 **ro,
             ),
         )
-        mode = self.get_parameter("mode").value
-        if mode not in ("lockstep", "realtime"):
-            raise ParamError("mode", mode, "one of lockstep, realtime")
-        rate = self.get_parameter("state_rate_hz").value or STATE_RATE_AUTO_HZ[mode]
-        base = load_controller_params(axis, self.get_parameter("controllers_file").value or None)
-        decls = declarations(base, ParameterDescriptor, FloatingPointRange, IntegerRange)
-        self.declare_parameters("", decls)
-        ok, reason, params = validate_updates(
-            base, [(n, self.get_parameter(n).value) for n, _, _ in decls], startup=True
-        )
-        if not ok:
-            raise ValueError(reason)
-        self.specs = specs_by_name(params)
-        self.params = params  # the newest accepted set
-        every = max(1, round(1.0 / (rate * params.sample_time_s))) if rate else 1
-        self.core = ControllerShellCore(axis, params, state_every=every)
-        self.add_pre_set_parameters_callback(self._coerce)
-        self.add_on_set_parameters_callback(self._validate)
-        self.add_post_set_parameters_callback(self._apply)
 
+    def _create_topics(self, mode: str, hosted: bool) -> None:
+        """Command, state and diagnostics publishers; raw sensor subscriptions unless hosted."""
+        axis = self.axis
         self.cmd_pub = self.create_publisher(
             JointState,
             VALVE_COMMAND_TOPIC[axis],
@@ -133,16 +155,6 @@ class ControllerNode(ShellDefaults, Node):
                 to_rclpy(sub_qos_for(topic, mode), rq),
                 raw=True,
             )
-        # diagnostics at 1 Hz of wall time (steady clock): works whether /clock runs or not,
-        # and with executors whose timers do not follow sim time; stamps use the node clock
-        self.create_timer(
-            1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME)
-        )
-        self.get_logger().info(
-            f"{axis} controller ({params.algorithm}), {mode} QoS, "
-            + ("hosted by the 1 kHz loop" if hosted else f"inputs {', '.join(self.core.topics)}")
-            + f", state every {every} tick(s)"
-        )
 
     # -- per sample: everything in the core ---------------------------------
     def _on_sensor(self, topic: str, data: bytes) -> None:
@@ -198,6 +210,7 @@ class ControllerNode(ShellDefaults, Node):
         )
 
     def safe_shutdown(self) -> None:
+        """On the way out: the neutral command (ignored when the context is already gone)."""
         try:
             self.publish_neutral()
         except Exception:  # context already shut down by the signal: the driver's watchdog acts
@@ -211,10 +224,12 @@ class ControllerNode(ShellDefaults, Node):
 
 
 def main_linear(args=None) -> int:
+    """``linear_controller``: the exit code."""
     return run_node("linear_controller", lambda: ControllerNode("linear"), args)
 
 
 def main_rotary(args=None) -> int:
+    """``rotary_controller``: the exit code."""
     return run_node("rotary_controller", lambda: ControllerNode("rotary"), args)
 
 

@@ -40,10 +40,12 @@ class ExciterShellCore:
 
     @property
     def n_samples(self) -> int:
+        """Complete sensor ticks so far."""
         return self.decoder.n_ticks
 
     @property
     def duration_s(self) -> float:
+        """The longest design's duration (s): the experiment ends with it."""
         return max(d.duration_s for d in self.designs.values())
 
     def designs_json(self) -> str:
@@ -74,11 +76,14 @@ class ExciterShellCore:
         return [(a, w.encode(self.last_stamp_ns, u_neutral)) for a, w in self.commands.items()]
 
     def segment(self, axis: str) -> str:
+        """The label of ``axis``'s current design segment ("waiting" before the first)."""
         ex = self.exciters[axis]
         i = ex.segment
         return self.designs[axis].segments[i].label if i >= 0 else "waiting"
 
     def diagnostics(self, node_name: str) -> list[DiagStatus]:
+        """One status per excited axis: its segment, samples and guard trips (WARN on incomplete,
+        late or bad input)."""
         a = self.decoder.assembler
         out = []
         for axis, ex in self.exciters.items():

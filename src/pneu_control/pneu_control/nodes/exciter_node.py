@@ -40,6 +40,9 @@ _AXES = {"linear": ("linear",), "rotary": ("rotary",), "both": ("linear", "rotar
 
 
 class ExciterNode(ShellDefaults, Node):
+    """The excitation experiment as an rclpy node: sensor payloads in, designed valve commands
+    out."""
+
     def __init__(self, **node_kwargs):
         super().__init__("pneu_exciter", **node_kwargs)
         ro = {"read_only": True}
@@ -103,6 +106,8 @@ class ExciterNode(ShellDefaults, Node):
         )
 
     def safe_shutdown(self) -> None:
+        """On the way out: 5 V for the last answered sample (ignored when the context is already
+        gone)."""
         try:  # last word: 5 V for the last answered sample
             for a, data in self.core.neutral_commands(NEUTRAL_V):
                 self.cmd_pub[a].publish(data)
@@ -111,6 +116,7 @@ class ExciterNode(ShellDefaults, Node):
 
 
 def main(args=None) -> int:
+    """``exciter``: the exit code."""
     return run_node("exciter", ExciterNode, args)
 
 

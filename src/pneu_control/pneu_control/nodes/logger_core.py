@@ -224,6 +224,8 @@ class LoggerCore:
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
     def set_node_params(self, node: str, values: Mapping[str, Any]) -> None:
+        """All parameters of ``node`` (read from its parameter service), replacing what was
+        known."""
         self.node_params[node] = dict(values)
 
     def on_parameter_event(self, stamp_ns: int, node: str, changed: Mapping[str, Any]) -> None:

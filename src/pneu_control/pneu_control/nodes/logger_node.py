@@ -41,8 +41,52 @@ _TYPES = {
 
 
 class LoggerNode(ShellDefaults, Node):
+    """The logger as an rclpy node: raw subscriptions to every pneu topic into the core; the graph's
+    parameters into the run metadata."""
+
     def __init__(self, **node_kwargs):
         super().__init__("logger", **node_kwargs)
+        self._declare_parameters()
+        mode = self.get_parameter("mode").value
+        if mode not in ("lockstep", "realtime"):
+            raise ValueError(f"mode: {mode!r} refused; allowed: one of lockstep, realtime")
+        recorder = self.get_parameter("recorder").value
+        if recorder not in ("pneu", "rosbag2"):
+            raise ValueError(f"recorder: {recorder!r} refused; allowed: one of pneu, rosbag2")
+        out = Path(self.get_parameter("out").value).expanduser()
+        out.mkdir(parents=True, exist_ok=True)
+        self.path = out / self.get_parameter("bag_name").value
+        record = recorder == "pneu"
+        self.core = LoggerCore(
+            self.path,
+            mode=mode,
+            compression=self.get_parameter("compression").value,
+            record=record,
+        )
+        if record:
+            self._subscribe_logged(mode)
+        self.create_subscription(
+            ParameterEvent,
+            "/parameter_events",
+            self._on_param_event,
+            rq.qos_profile_parameter_events,
+        )
+        self.diag_pub = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
+        )
+        self._param_clients: dict[str, AsyncParameterClient] = {}  # (Node.clients is rclpy's)
+        self._pending: set[str] = set()
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(0.25, self._discover, clock=steady)  # parameters of every node, early
+        self.create_timer(1.0, self._diagnostics, clock=steady)
+        self.get_logger().info(
+            f"logging to {self.path} ({mode})"
+            if record
+            else f"run metadata for the rosbag2 bag {self.path} ({mode})"
+        )
+
+    def _declare_parameters(self) -> None:
+        """out, bag_name, recorder, mode, compression: read-only, read once at start."""
         ro = {"read_only": True}
         self.declare_parameter(
             "out", ".", ParameterDescriptor(description="output directory", **ro)
@@ -85,23 +129,10 @@ class LoggerNode(ShellDefaults, Node):
                 **ro,
             ),
         )
-        mode = self.get_parameter("mode").value
-        if mode not in ("lockstep", "realtime"):
-            raise ValueError(f"mode: {mode!r} refused; allowed: one of lockstep, realtime")
-        recorder = self.get_parameter("recorder").value
-        if recorder not in ("pneu", "rosbag2"):
-            raise ValueError(f"recorder: {recorder!r} refused; allowed: one of pneu, rosbag2")
-        out = Path(self.get_parameter("out").value).expanduser()
-        out.mkdir(parents=True, exist_ok=True)
-        self.path = out / self.get_parameter("bag_name").value
-        record = recorder == "pneu"
-        self.core = LoggerCore(
-            self.path,
-            mode=mode,
-            compression=self.get_parameter("compression").value,
-            record=record,
-        )
-        for topic, ros_type in LOGGED_TOPICS if record else ():
+
+    def _subscribe_logged(self, mode: str) -> None:
+        """One raw subscription per logged topic, into the core."""
+        for topic, ros_type in LOGGED_TOPICS:
             prof = qos_for(topic, mode)
             prof = dataclasses.replace(
                 prof, depth=max(prof.depth, 1000)
@@ -118,27 +149,9 @@ class LoggerNode(ShellDefaults, Node):
                 to_rclpy(prof, rq),
                 raw=True,
             )
-        self.create_subscription(
-            ParameterEvent,
-            "/parameter_events",
-            self._on_param_event,
-            rq.qos_profile_parameter_events,
-        )
-        self.diag_pub = self.create_publisher(
-            DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
-        )
-        self._param_clients: dict[str, AsyncParameterClient] = {}  # (Node.clients is rclpy's)
-        self._pending: set[str] = set()
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(0.25, self._discover, clock=steady)  # parameters of every node, early
-        self.create_timer(1.0, self._diagnostics, clock=steady)
-        self.get_logger().info(
-            f"logging to {self.path} ({mode})"
-            if record
-            else f"run metadata for the rosbag2 bag {self.path} ({mode})"
-        )
 
     def safe_shutdown(self) -> None:
+        """Close the bag (metadata, summary, footer) and say where it is."""
         written = self.core.close()  # metadata, summary, footer: the bag is complete
         print(f"logger: wrote {written}", file=sys.stderr)
 
@@ -192,6 +205,7 @@ class LoggerNode(ShellDefaults, Node):
 
 
 def main(args=None) -> int:
+    """``logger``: the exit code."""
     return run_node("logger", LoggerNode, args)
 
 

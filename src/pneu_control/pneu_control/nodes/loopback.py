@@ -42,20 +42,12 @@ from pneu_sim.cycle.rig_cycle import RigCycle
 from pneu_sim.nodes.sim_core import safety_statuses
 from pneu_sim.physics.plant import Plant
 
-from pneu_control.analysis.metrics import WindowSpec
 from pneu_control.controller.axis import STATE_FIELDS
-from pneu_control.experiment.runner import (
-    SAMPLE_FIELDS,
-    RunResult,
-    RunSpec,
-    axis_metrics,
-    fault_intervals_of,
-)
+from pneu_control.experiment.runner import SAMPLE_FIELDS, RunResult, RunSpec, result_of
 from pneu_control.nodes.controller_core import ControllerShellCore
 
 __all__ = ["run_loopback"]
 
-_MEASURED = {"linear": "x", "rotary": "omega"}
 _DIAG = "diagnostic_msgs/msg/DiagnosticArray"
 
 
@@ -93,16 +85,6 @@ def run_loopback(
     ros_type, data)`` receives every message as published, in publication
     order, ``/clock`` included (e.g. a :class:`LoggerCore`).
     """
-    ts = typestore_messages()
-    messages = [0, 0]  # count, bytes
-
-    def send(topic: str, data: bytes) -> bytes:
-        messages[0] += 1
-        messages[1] += len(data)
-        if tap is not None:
-            tap(topic, TOPIC_BY_NAME[topic].ros_type, data)
-        return data
-
     plant = Plant(spec.plant, seed=spec.seed)
     if supervisor is None and spec.safety is not None:
         from pneu_driver.safety import SafetySupervisor
@@ -116,93 +98,114 @@ def run_loopback(
         faults=spec.faults,
         seed=spec.seed,
     )
-    shells = {axis: ControllerShellCore(axis, spec.controllers[axis]) for axis in spec.axes}
-    commands = {axis: CommandWire(axis) for axis in spec.axes}
-    sensors = SensorWire()
-    n = int(round(spec.duration_s / plant.T))
-    drain = getattr(supervisor, "events", None)
-
-    rec_samples = []
-    rec_state: dict[str, list[tuple[float, ...]]] = {a: [] for a in spec.axes}
-    rec_u: dict[str, list[float]] = {a: [] for a in spec.axes}
-    rec_out: list[tuple[float, float]] = []
-    events_all: list[Any] = []
-    algorithms: dict[str, str] = {}
+    loop = _Lockstep(spec, core, supervisor, tap)
     t_wall = time.perf_counter()
-    s = core.reset()
-    for _ in range(n):
-        if tap is not None:  # /clock first, as the sim node publishes it (nobody here reads it)
-            send(CLOCK_TOPIC, clock_bytes(s.stamp_ns))
-        wired = [(topic, send(topic, data)) for topic, data in sensors.encode(s)]
-        for axis, shell in shells.items():
-            for topic, data in wired:  # one publication order; the assembler copes with any
-                if topic not in shell.topics:
-                    continue
-                out = shell.step_raw(topic, data)
-                if out is None:
-                    continue
-                stamp, u = commands[axis].decode(send(VALVE_COMMAND_TOPIC[axis], out[0]))
-                status = core.offer(axis, stamp, u)
-                if status not in ("accepted", "silent", "invalid"):
-                    raise RuntimeError(f"{axis}: answer to {stamp} ns {status}")
-                state = ts.deserialize_cdr(
-                    send(CONTROLLER_STATE_TOPIC[axis], out[1]), "sensor_msgs/msg/JointState"
-                )
-                st_stamp, alg, values = controller_state_from_msg(state)
-                if st_stamp != stamp:
-                    raise RuntimeError(f"{axis}: state stamped {st_stamp}, command {stamp}")
-                rec_state[axis].append(tuple(values[f] for f in STATE_FIELDS))
-                rec_u[axis].append(u)
-                algorithms[axis] = alg
-        rec_samples.append(s)
-        if not core.complete:
-            raise RuntimeError(f"lockstep: no answer from {core.waiting_for} to sample {s.k}")
-        if drain is not None:
-            events = drain()
-            events_all.extend(events)
-            if events and tap is not None:  # the sim node's /diagnostics for them
-                send(DIAGNOSTICS_TOPIC, _diag_bytes(ts, s.stamp_ns, events))
-        rec_out.append(core.held_pair)
-        s = core.advance()
+    loop.run(int(round(spec.duration_s / plant.T)))
     wall = time.perf_counter() - t_wall
-
-    t = np.array([r.stamp_ns for r in rec_samples], dtype=np.int64) * 1e-9
-    samples = {
-        f: np.array([getattr(r, f) for r in rec_samples], dtype=float) for f in SAMPLE_FIELDS
-    }
-    intervals = fault_intervals_of(spec, events_all, plant.T)
-    axes: dict[str, dict[str, np.ndarray]] = {}
-    metrics = {}
-    m = len(rec_samples)
-    for axis in spec.axes:
-        block = np.array(rec_state[axis], dtype=float).reshape(m, len(STATE_FIELDS))
-        cols = {name: block[:, i] for i, name in enumerate(STATE_FIELDS)}
-        cols["u"] = np.array(rec_u[axis], dtype=float)
-        axes[axis] = cols
-        window = spec.windows.get(axis, WindowSpec(kind="fixed"))
-        if m > 1:
-            metrics[axis] = axis_metrics(
-                axis,
-                t,
-                cols["reference"],
-                samples[_MEASURED[axis]],
-                window,
-                intervals,
-                spec.include_faults,
-            )
-    applied = np.array(rec_out, dtype=float).reshape(m, 2)
-    result = RunResult(
-        spec,
-        t,
-        samples,
-        axes,
-        algorithms,
-        metrics,
-        wall,
-        applied={"linear": applied[:, 0], "rotary": applied[:, 1]},
-        safety_events=events_all,
-        fault_intervals=intervals,
-        safety_counters=dict(getattr(supervisor, "counters", {}) or {}),
-    )
-    result.wire = {"messages": messages[0], "bytes": messages[1], **core.counters()}  # type: ignore[attr-defined]
+    result = loop.result(plant.T, wall)
+    result.wire = {"messages": loop.messages, "bytes": loop.bytes, **core.counters()}  # type: ignore[attr-defined]
     return result
+
+
+class _Lockstep:
+    """The sim's cycle and the controller shell cores of one loopback run, and what it recorded."""
+
+    def __init__(
+        self,
+        spec: RunSpec,
+        core: RigCycle,
+        supervisor: Any | None,
+        tap: Callable[[str, str, bytes], None] | None,
+    ) -> None:
+        self.spec, self.core, self.supervisor, self.tap = spec, core, supervisor, tap
+        self.ts = typestore_messages()
+        self.messages = 0
+        self.bytes = 0
+        self.shells = {
+            axis: ControllerShellCore(axis, spec.controllers[axis]) for axis in spec.axes
+        }
+        self.commands = {axis: CommandWire(axis) for axis in spec.axes}
+        self.sensors = SensorWire()
+        self.drain = getattr(supervisor, "events", None)
+        self.rec_samples: list[Any] = []
+        self.rec_state: dict[str, list[tuple[float, ...]]] = {a: [] for a in spec.axes}
+        self.rec_u: dict[str, list[float]] = {a: [] for a in spec.axes}
+        self.rec_out: list[tuple[float, float]] = []
+        self.events: list[Any] = []
+        self.algorithms: dict[str, str] = {}
+
+    def send(self, topic: str, data: bytes) -> bytes:
+        """Publish ``data`` on ``topic``: count it and hand it to the tap."""
+        self.messages += 1
+        self.bytes += len(data)
+        if self.tap is not None:
+            self.tap(topic, TOPIC_BY_NAME[topic].ros_type, data)
+        return data
+
+    def run(self, n: int) -> None:
+        """``n`` lockstep cycles from the cycle's reset."""
+        core, send = self.core, self.send
+        s = core.reset()
+        for _ in range(n):
+            if self.tap is not None:  # /clock first, as the sim node publishes it (nobody reads it)
+                send(CLOCK_TOPIC, clock_bytes(s.stamp_ns))
+            wired = [(topic, send(topic, data)) for topic, data in self.sensors.encode(s)]
+            for axis, shell in self.shells.items():
+                for topic, data in wired:  # one publication order; the assembler copes with any
+                    if topic in shell.topics:
+                        self.answer(axis, shell.step_raw(topic, data))
+            self.rec_samples.append(s)
+            if not core.complete:
+                raise RuntimeError(f"lockstep: no answer from {core.waiting_for} to sample {s.k}")
+            if self.drain is not None:
+                events = self.drain()
+                self.events.extend(events)
+                if events and self.tap is not None:  # the sim node's /diagnostics for them
+                    send(DIAGNOSTICS_TOPIC, _diag_bytes(self.ts, s.stamp_ns, events))
+            self.rec_out.append(core.held_pair)
+            s = core.advance()
+
+    def answer(self, axis: str, out: tuple[bytes, bytes] | None) -> None:
+        """A shell's (command, state) payloads, if it answered: offered to the cycle, recorded."""
+        if out is None:
+            return
+        stamp, u = self.commands[axis].decode(self.send(VALVE_COMMAND_TOPIC[axis], out[0]))
+        status = self.core.offer(axis, stamp, u)
+        if status not in ("accepted", "silent", "invalid"):
+            raise RuntimeError(f"{axis}: answer to {stamp} ns {status}")
+        state = self.ts.deserialize_cdr(
+            self.send(CONTROLLER_STATE_TOPIC[axis], out[1]), "sensor_msgs/msg/JointState"
+        )
+        st_stamp, alg, values = controller_state_from_msg(state)
+        if st_stamp != stamp:
+            raise RuntimeError(f"{axis}: state stamped {st_stamp}, command {stamp}")
+        self.rec_state[axis].append(tuple(values[f] for f in STATE_FIELDS))
+        self.rec_u[axis].append(u)
+        self.algorithms[axis] = alg
+
+    def result(self, period_s: float, wall_s: float) -> RunResult:
+        """The recorded cycles as the runner's :class:`RunResult` (same intervals and metrics)."""
+        rec = self.rec_samples
+        m = len(rec)
+        t = np.array([r.stamp_ns for r in rec], dtype=np.int64) * 1e-9
+        samples = {f: np.array([getattr(r, f) for r in rec], dtype=float) for f in SAMPLE_FIELDS}
+        axes: dict[str, dict[str, np.ndarray]] = {}
+        for axis in self.spec.axes:
+            block = np.array(self.rec_state[axis], dtype=float).reshape(m, len(STATE_FIELDS))
+            cols = {name: block[:, i] for i, name in enumerate(STATE_FIELDS)}
+            cols["u"] = np.array(self.rec_u[axis], dtype=float)
+            axes[axis] = cols
+        held = np.array(self.rec_out, dtype=float).reshape(m, 2)
+        counters = dict(getattr(self.supervisor, "counters", {}) or {})
+        return result_of(
+            self.spec,
+            t,
+            samples,
+            axes,
+            held,
+            self.events,
+            counters,
+            period_s,
+            wall_s,
+            algorithms=self.algorithms,
+        )

@@ -19,7 +19,7 @@ from typing import Any
 
 from pneu_control.controller.params import ALGORITHMS
 from pneu_control.experiment import paper, session
-from pneu_control.experiment.catalog import PAPER_EXPERIMENTS, Experiment
+from pneu_control.experiment.catalog import PAPER_CONTROLLERS, PAPER_EXPERIMENTS, Experiment
 from pneu_control.experiment.compiled import warm_up
 from pneu_control.sweep.executors import map_tasks
 from pneu_control.sweep.sampling import Factor, draw_points, factors_of, plant_of
@@ -33,8 +33,6 @@ __all__ = [
     "plan_sweep",
     "run_sweep",
 ]
-
-PAPER_CONTROLLERS = ("pid", "ladrc", "eso_smc")
 
 
 def default_pairs(exp: Experiment) -> tuple[tuple[str, str], ...]:
@@ -101,6 +99,8 @@ class SweepPlan:
 
 @dataclass
 class SweepResult:
+    """A sweep that ran: its plan, one row per run, the wall time and executor."""
+
     plan: SweepPlan
     rows: list[RunRow]
     wall_s: float
@@ -109,6 +109,7 @@ class SweepResult:
 
     @property
     def factor_names(self) -> list[str]:
+        """The sampled factors' names, in plan order."""
         return [f.name for f in self.plan.factors]
 
 
@@ -149,21 +150,21 @@ def plan_sweep(
         if g not in files:
             raise ValueError(f"gains: {g!r} refused; allowed: one of {', '.join(files)}")
     runs: list[tuple[Experiment, str, str, Any]] = []
+    base = session.RunOptions(
+        axes=(), sets=sets, plant=nominal, safety=safety, safety_file=safety_file
+    )
     for exp in exps:
         for c, g in default_pairs(exp):
             if (controllers and c not in controllers) or (gains and g not in gains):
                 continue
             spec = session.build_spec(
+                base,
                 axes=(exp.axis,),
                 controller=c,
                 reference=dict(exp.reference),
-                sets=sets,
                 duration_s=exp.duration_s,
                 controllers_file=files[g],
-                plant=nominal,
                 name=f"{exp.id}/{c}/{g}",
-                safety=safety,
-                safety_file=safety_file,
             )
             runs.append((exp, c, g, dataclasses.replace(spec, windows={exp.axis: exp.window})))
     if not runs:

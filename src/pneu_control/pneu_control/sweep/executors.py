@@ -42,6 +42,7 @@ class SweepExecutorError(RuntimeError):
 
 
 def default_workers() -> int:
+    """The CPUs this process may run on (all CPUs where affinity is unknown)."""
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pneu_control.analysis.plots import _pyplot
+from pneu_control.analysis.plots import pyplot
 from pneu_control.experiment.catalog import Experiment
 
 __all__ = ["plot_bands"]
@@ -40,7 +40,7 @@ def plot_bands(
     path: str | Path,
 ) -> Path:
     """``rows`` (table order, aligned with ``envelopes``) of one sweep; draws ``exp``'s."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(9.0, 7.0))
     groups = [g for g in summaries if g.experiment == exp.id]
     n = len({r["sample"] for r in rows if r["experiment"] == exp.id})

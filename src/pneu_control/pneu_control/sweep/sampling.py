@@ -38,6 +38,7 @@ class Factor:
 
     @property
     def discrete(self) -> bool:
+        """Is this a choice among labelled readings (not a continuous range)?"""
         return bool(self.labels)
 
     def value(self, u: float) -> float | str:

@@ -40,17 +40,24 @@ RANKED = ("eso_smc", "ladrc", "pid")  # the paper's ranking, best first
 
 @dataclass(frozen=True)
 class Band:
+    """The 5 %, 50 % and 95 % quantiles of a figure over the plant samples (a failed sample counts
+    as +inf)."""
+
     q05: float
     median: float
     q95: float
     failed: int  # samples without a number (+inf here)
 
     def holds(self, x: float | None) -> bool | None:
+        """Is ``x`` inside [q05, q95]? (None for no ``x``)"""
         return None if x is None else bool(self.q05 <= x <= self.q95)
 
 
 @dataclass(frozen=True)
 class GroupSummary:
+    """One (experiment, controller, gains) group over the plant samples: bands, trips, the paper's
+    figures against the bands, sensitivities."""
+
     experiment: str
     controller: str
     gains: str
@@ -67,11 +74,15 @@ class GroupSummary:
     sensitivity: list[tuple[str, float]]  # (factor, Spearman ρ of e_max), top 3 by |ρ|
 
     def to_dict(self) -> dict[str, Any]:
+        """The summary as plain data."""
         return asdict(self)
 
 
 @dataclass(frozen=True)
 class Ranking:
+    """How often the paper's ranking (ESO-SMC < LADRC < PID) holds over the plant samples, with its
+    95 % interval."""
+
     experiment: str
     gains: str
     metric: str
@@ -82,6 +93,7 @@ class Ranking:
     p_ladrc_lt_pid: float
 
     def to_dict(self) -> dict[str, Any]:
+        """The ranking as plain data."""
         return asdict(self)
 
 
@@ -91,6 +103,7 @@ def _finite_or_inf(values: Sequence[float]) -> np.ndarray:
 
 
 def band(values: Sequence[float]) -> Band:
+    """The :class:`Band` of ``values`` (non-finite ones as +inf, counted as failed)."""
     a = _finite_or_inf(values)
     q = np.quantile(a, QUANTILES, method="inverted_cdf")
     return Band(float(q[0]), float(q[1]), float(q[2]), int(np.isinf(a).sum()))

@@ -18,7 +18,7 @@ import numpy as np
 
 from pneu_control.experiment.catalog import Experiment
 from pneu_control.experiment.compiled import run_compiled
-from pneu_control.experiment.runner import _MEASURED, RunResult, RunSpec
+from pneu_control.experiment.runner import MEASURED, RunResult, RunSpec
 
 __all__ = ["ENVELOPE_S", "RunRow", "SweepTask", "run_task", "simulate"]
 
@@ -37,6 +37,9 @@ def simulate(spec: RunSpec) -> RunResult:
 
 @dataclass(frozen=True)
 class SweepTask:
+    """One run of a sweep: its place in the table, plant sample, experiment, controller, gain set
+    and spec."""
+
     index: int  # position in the table
     sample: int
     experiment: Experiment
@@ -69,14 +72,14 @@ class RunRow:
 
 def run_task(task: SweepTask) -> RunRow:
     """Run one task (in whichever process) and reduce it to its row."""
-    from pneu_control.experiment.paper import _first_trip, _in_band
+    from pneu_control.experiment.paper import first_trip, in_band
 
     exp, spec = task.experiment, task.spec
     result = simulate(spec)
     m = result.metrics[exp.axis]
     band = None
     if exp.band is not None and math.isfinite(m.e_max):
-        band = _in_band(result, exp, m)
+        band = in_band(result, exp, m)
     errors = [e for e in result.safety_events if e.level == "ERROR" and e.axis in (exp.axis, "all")]
     return RunRow(
         index=task.index,
@@ -92,7 +95,7 @@ def run_task(task: SweepTask) -> RunRow:
         window_start_s=m.window_start_s,
         window_end_s=m.window_end_s,
         in_band=band,
-        safety_trip=_first_trip(result, exp.axis) or "",
+        safety_trip=first_trip(result, exp.axis) or "",
         safety_errors=len(errors),
         envelope=error_envelope(result, exp),
     )
@@ -101,16 +104,16 @@ def run_task(task: SweepTask) -> RunRow:
 def error_envelope(result: RunResult, exp: Experiment) -> np.ndarray:
     """max |reference − measured| per ENVELOPE_S bin, with the metric's averaging
     (one revolution on the rotary axis), in report units; NaN where nothing finite."""
-    from pneu_control.analysis.metrics import _UNIT, moving_average
+    from pneu_control.analysis.metrics import UNITS, moving_average
 
     t = result.t
     ref = result.axes[exp.axis]["reference"]
-    y = result.samples[_MEASURED[exp.axis]]
+    y = result.samples[MEASURED[exp.axis]]
     dt = float(t[1] - t[0])
     if exp.window.average_s > 0.0:
         n_avg = max(1, int(round(exp.window.average_s / dt)))
         ref, y = moving_average(ref, n_avg), moving_average(y, n_avg)
-    e = np.abs(ref - y) * _UNIT[exp.axis][1]
+    e = np.abs(ref - y) * UNITS[exp.axis][1]
     per = max(1, int(round(ENVELOPE_S / dt)))
     n_bins = math.ceil(e.size / per)
     padded = np.full(n_bins * per, np.nan)

@@ -76,6 +76,7 @@ class Segment:
 
     @property
     def t1_s(self) -> float:
+        """End of the segment, s from the start of the design."""
         return self.t0_s + self.duration_s
 
 
@@ -113,6 +114,7 @@ class ExcitationDesign:
 
     @property
     def duration_s(self) -> float:
+        """The design's length in s (the end of its last segment)."""
         return self.segments[-1].t1_s if self.segments else 0.0
 
     def segment_at(self, t: float) -> int:
@@ -131,6 +133,7 @@ class ExcitationDesign:
         return Exciter(self, sample_time_s)
 
     def to_dict(self) -> dict[str, Any]:
+        """The design as plain data (infinite guards as ``None``)."""
         d = asdict(self)
         for s in d["segments"]:
             for key in ("guard_lo", "guard_hi"):
@@ -139,6 +142,8 @@ class ExcitationDesign:
         return d
 
     def to_json(self) -> str:
+        """The design as JSON (the bag's ``pneu.excite`` record; read back by
+        :func:`design_from_json`)."""
         return json.dumps(self.to_dict(), sort_keys=True)
 
 

@@ -113,6 +113,7 @@ class Exciter:
         self.reset()
 
     def reset(self) -> None:
+        """Back to before the first sample: no segment, neutral command, guards clear."""
         self._t0_ns: int | None = None
         self._seg = -1
         self._pid: Pid | None = None

@@ -46,6 +46,9 @@ CORRELATED = 0.95
 
 @dataclass(frozen=True)
 class FitOptions:
+    """How the output-error fit runs: segment lengths, decimation, the least-squares steps and
+    stops, the parameters fitted."""
+
     segment_s: dict[str, float] = field(default_factory=lambda: {"linear": 1.0, "rotary": 2.0})
     decimate: int = 4  # residual every 4th sample
     diff_step: float = 3e-3
@@ -59,6 +62,9 @@ class FitOptions:
 
 @dataclass
 class AxisFit:
+    """The fit of one axis: the parameters' base and fitted values with 1 σ and correlations, the
+    sensor offsets, the cost and effort."""
+
     axis: str
     names: list[str]
     units: list[str]
@@ -78,6 +84,7 @@ class AxisFit:
     plant: object = None  # the fitted PlantParams
 
     def ci95(self, i: int) -> float:
+        """95 % half-width of parameter ``i`` (1.96 σ), in its unit."""
         return 1.96 * self.sigma[i]
 
     def rel_ci95(self, i: int) -> float:
@@ -86,6 +93,8 @@ class AxisFit:
         return self.ci95(i) / abs(v) if v else math.inf
 
     def correlated_pairs(self, limit: float = CORRELATED) -> list[tuple[str, str, float]]:
+        """Pairs of fitted parameters whose correlation exceeds ``limit`` in magnitude: (name, name,
+        r)."""
         out = []
         n = len(self.names)
         for i in range(n):

@@ -41,17 +41,23 @@ _QUIET_SIGNALS = {"linear": ("x", "p_c1", "p_c2"), "rotary": ("p_m1",)}
 
 @dataclass
 class NoiseEstimate:
+    """One sensor's noise σ from the quiet segments (SI) and the samples it rests on."""
+
     signal: str
     sigma: float  # SI (m or Pa)
     n: int
 
     @property
     def rel_ci95(self) -> float:
+        """95 % half-width of σ, relative to σ."""
         return 1.96 / math.sqrt(max(self.n - 1, 1))  # σ of a σ estimate ≈ σ/√(2N), ×√2 for Δy
 
 
 @dataclass
 class Identification:
+    """What ``pneu identify`` found: the base and identified plants, the fits per axis, the noise,
+    what was kept."""
+
     base: Any  # PlantParams
     plant: Any  # PlantParams, identified
     fits: dict[str, AxisFit]
@@ -61,6 +67,8 @@ class Identification:
     notes: list[str] = field(default_factory=list)
 
     def rows(self) -> list[dict[str, Any]]:
+        """One dict per fitted parameter: base, identified value, 95 % CI and whether it was
+        taken."""
         out = []
         for fit in self.fits.values():
             for i, name in enumerate(fit.names):
@@ -78,6 +86,7 @@ class Identification:
         return out
 
     def to_dict(self) -> dict[str, Any]:
+        """The identification as plain data (the ``.identify.json`` report)."""
         return {
             "bags": self.bags,
             "parameters": self.rows(),
@@ -106,6 +115,8 @@ class Identification:
         }
 
     def report(self) -> str:
+        """The identification as Markdown: one table row per parameter and noise estimate, then
+        the correlated pairs and each bag's pressure sensor offsets."""
         lines = ["| parameter | base | identified | 95 % CI | taken |", "|---|---|---|---|---|"]
         for r in self.rows():
             ci = (
@@ -281,25 +292,11 @@ def output_claims(
     return plant.check(), report.check()
 
 
-def write_plant(
-    ident: Identification,
-    base_tree: dict,
-    out: str | Path | tuple[Any, Any],
-    *,
-    overwrite: bool = False,
-) -> Path:
-    """Write the identified plant.yaml and its report (claims of :func:`output_claims`, or a
-    path: claimed here; never overwrites unless ``overwrite``). Both are written as
-    ``NAME.partial``, the YAML read back strictly, and renamed when both are complete."""
+def _identified_tree(ident: Identification, base_tree: dict, names: str) -> dict:
+    """``base_tree`` with the identified leaves replaced (each saying how it was identified
+    from ``names``) and the unidentifiable ones marked as kept."""
     from pneu_msgs_py.params.core import flatten
-    from pneu_msgs_py.params.yaml_file import load_yaml
-    from pneu_sim.physics.plant_file import params_from_tree, plant_tree_yaml
 
-    claims = out if isinstance(out, tuple) else output_claims(out, overwrite=overwrite)
-    names = ", ".join(
-        Path(b).name if Path(b).name != "run.mcap" else str(Path(b).parent.name + "/run.mcap")
-        for b in ident.bags
-    )
     tree = copy.deepcopy(base_tree)
     values = flatten(ident.plant)
     for fit in ident.fits.values():
@@ -342,6 +339,28 @@ def write_plant(
                 float(values[leaf]),
                 f"identified from the quiet segments of {names} (±{100 * rel:.2g} %)",
             )
+    return tree
+
+
+def write_plant(
+    ident: Identification,
+    base_tree: dict,
+    out: str | Path | tuple[Any, Any],
+    *,
+    overwrite: bool = False,
+) -> Path:
+    """Write the identified plant.yaml and its report (claims of :func:`output_claims`, or a
+    path: claimed here; never overwrites unless ``overwrite``). Both are written as
+    ``NAME.partial``, the YAML read back strictly, and renamed when both are complete."""
+    from pneu_msgs_py.params.yaml_file import load_yaml
+    from pneu_sim.physics.plant_file import params_from_tree, plant_tree_yaml
+
+    claims = out if isinstance(out, tuple) else output_claims(out, overwrite=overwrite)
+    names = ", ".join(
+        Path(b).name if Path(b).name != "run.mcap" else str(Path(b).parent.name + "/run.mcap")
+        for b in ident.bags
+    )
+    tree = _identified_tree(ident, base_tree, names)
     header = [
         "# Plant of the linear-rotary pneumatic actuator twin (pneu_sim), identified by `pneu identify`",
         f"# from {names}. Each leaf: value, unit, source; identified leaves say so, with their",

@@ -40,6 +40,9 @@ DEAD_BAND = "dead_band"  # handle suffix: shift of a valve's du_table breakpoint
 
 @dataclass(frozen=True)
 class FitParam:
+    """One parameter identification may change: its plant path, axis, bounds, unit and the scale of
+    the fit's coordinate z."""
+
     name: str  # dotted plant.yaml path, or "<valve>.dead_band"
     axis: str  # linear | rotary: whose data inform it
     transform: str  # log | lin
@@ -50,16 +53,19 @@ class FitParam:
     width: float = 1.0  # z = (g(p) - g(p0)) / width
 
     def to_z(self, value: float, base: float) -> float:
+        """The fit coordinate of ``value`` about ``base`` (log or linear, over ``width``)."""
         if self.transform == "log":
             return math.log(value / base) / self.width
         return (value - base) / self.width
 
     def from_z(self, z: float, base: float) -> float:
+        """The value at fit coordinate ``z`` about ``base`` (inverse of :meth:`to_z`)."""
         if self.transform == "log":
             return base * math.exp(z * self.width)
         return base + z * self.width
 
     def z_bounds(self, base: float) -> tuple[float, float]:
+        """The bounds [lo, hi] as fit coordinates about ``base``."""
         return self.to_z(self.lo, base), self.to_z(self.hi, base)
 
 

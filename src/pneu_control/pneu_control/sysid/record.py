@@ -74,10 +74,12 @@ class Record:
 
     @property
     def n(self) -> int:
+        """Samples on the record's grid."""
         return len(self.stamp_ns)
 
     @property
     def t(self) -> np.ndarray:
+        """Sample times, s from the first sample."""
         return (self.stamp_ns - self.stamp_ns[0]) * 1e-9
 
     def quiet_mask(self, axis: str, min_s: float = 0.5) -> np.ndarray:
@@ -158,22 +160,10 @@ def _safety_start(data, axis: str, stamps: np.ndarray) -> int | None:
     return None
 
 
-def load_record(path: str | Path) -> Record:
-    """Read ``path`` (``.mcap`` or rosbag2 directory) into a :class:`Record`."""
-    path = str(path)
-    data = read_run(path)
+def _measured(data, stamps: np.ndarray) -> dict[str, np.ndarray]:
+    """The sensor values (p_c1, p_c2, p_m1, x, theta, omega) at ``stamps``; NaN where lost."""
     js_lin = data.topics.get(JOINT_STATE_TOPIC["linear"])
     js_rot = data.topics.get(JOINT_STATE_TOPIC["rotary"])
-    base = js_lin if js_lin is not None and len(js_lin) else js_rot
-    if base is None or not len(base):
-        raise MissingTopicError(path, "no sensor samples (/pneu/<axis>/joint_state)")
-    seen = np.asarray(base.stamp_ns, dtype=np.int64)
-    notes: list[str] = []
-    # the sample clock's grid from the first to the last stamp: a lost message is a NaN
-    period_ns = int(np.median(np.diff(seen))) if len(seen) > 1 else 1_000_000
-    stamps = np.arange(int(seen[0]), int(seen[-1]) + 1, period_ns, dtype=np.int64)
-    if len(stamps) > len(seen):
-        notes.append(f"{len(stamps) - len(seen)} of {len(stamps)} samples missing (lost messages)")
     y: dict[str, np.ndarray] = {}
     for name, frame in _PRESSURE_FIELD.items():
         topic = next(t for t, (_, fr) in PRESSURE_TOPICS.items() if fr == frame)
@@ -193,6 +183,12 @@ def load_record(path: str | Path) -> Record:
         y["omega"] = _aligned(stamps, js_rot.stamp_ns, js_rot["rotary.velocity"])
     else:
         y["theta"] = y["omega"] = np.full(len(stamps), math.nan)
+    return y
+
+
+def _held_commands(data, stamps: np.ndarray, notes: list[str]):
+    """Per axis the voltage held over each sample period (neutral before the first command),
+    where it is unknown (a lost command), and the axes that were commanded."""
     u: dict[str, np.ndarray] = {}
     unknown: dict[str, np.ndarray] = {}
     commanded = []
@@ -216,6 +212,27 @@ def load_record(path: str | Path) -> Record:
             last = np.where(idx >= 0, c[np.maximum(idx, 0)], NEUTRAL_V)
             held[1:] = last[:-1]
         u[axis] = held
+    return u, unknown, commanded
+
+
+def load_record(path: str | Path) -> Record:
+    """Read ``path`` (``.mcap`` or rosbag2 directory) into a :class:`Record`."""
+    path = str(path)
+    data = read_run(path)
+    js_lin = data.topics.get(JOINT_STATE_TOPIC["linear"])
+    js_rot = data.topics.get(JOINT_STATE_TOPIC["rotary"])
+    base = js_lin if js_lin is not None and len(js_lin) else js_rot
+    if base is None or not len(base):
+        raise MissingTopicError(path, "no sensor samples (/pneu/<axis>/joint_state)")
+    seen = np.asarray(base.stamp_ns, dtype=np.int64)
+    notes: list[str] = []
+    # the sample clock's grid from the first to the last stamp: a lost message is a NaN
+    period_ns = int(np.median(np.diff(seen))) if len(seen) > 1 else 1_000_000
+    stamps = np.arange(int(seen[0]), int(seen[-1]) + 1, period_ns, dtype=np.int64)
+    if len(stamps) > len(seen):
+        notes.append(f"{len(stamps) - len(seen)} of {len(stamps)} samples missing (lost messages)")
+    y = _measured(data, stamps)
+    u, unknown, commanded = _held_commands(data, stamps, notes)
     valid = {}
     for axis in AXES:
         v = np.ones(len(stamps), dtype=bool)

@@ -89,6 +89,7 @@ def perturbed_plant(base, names: str | list[str]):
 
 
 def true_value(base, truth, name: str) -> float:
+    """The hidden plant's value of fit parameter ``name`` (a dead band: its shift from ``base``)."""
     if name.endswith("." + model.DEAD_BAND):
         valve = name.split(".")[0]
         return getattr(truth, valve).du_table[1] - getattr(base, valve).du_table[1]
@@ -97,6 +98,9 @@ def true_value(base, truth, name: str) -> float:
 
 @dataclass
 class Row:
+    """One parameter of the study: truth, base, identified value with its 95 % CI, and the tolerance
+    it is scored against."""
+
     name: str
     truth: float
     base: float
@@ -113,9 +117,11 @@ class Row:
 
     @property
     def ok(self) -> bool:
+        """Is the error inside the tolerance?"""
         return abs(self.error) <= self.tol[1]
 
     def to_dict(self) -> dict[str, Any]:
+        """The row as plain data."""
         return {
             "name": self.name,
             "truth": self.truth,
@@ -131,6 +137,9 @@ class Row:
 
 @dataclass
 class StudyResult:
+    """One perturbed plant of the study: the parameter rows, the validations of its bags, the
+    identification."""
+
     plant: str
     rows: list[Row]
     validations: list[BagValidation]
@@ -140,9 +149,11 @@ class StudyResult:
     true_plant: Any = None
 
     def failures(self) -> list[Row]:
+        """Rows taken into the identified plant whose error is outside the tolerance."""
         return [r for r in self.rows if r.taken and not r.ok]
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as plain data."""
         return {
             "plant": self.plant,
             "parameters": [r.to_dict() for r in self.rows],
@@ -152,6 +163,7 @@ class StudyResult:
         }
 
     def markdown(self) -> str:
+        """The result as a Markdown section: one table row per parameter."""
         lines = [
             f"#### {self.plant}",
             "",
@@ -187,6 +199,7 @@ _SIG = ("x", "p_c1", "p_c2", "p_m1", "omega")
 
 
 def compare(ident: Identification, base, truth) -> list[Row]:
+    """One :class:`Row` per fitted parameter of ``ident``, against the hidden plant ``truth``."""
     rows = []
     for fit in ident.fits.values():
         for i, name in enumerate(fit.names):

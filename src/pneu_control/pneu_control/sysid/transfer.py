@@ -28,6 +28,9 @@ TRANSFER_TOLERANCE = 0.20
 
 @dataclass(frozen=True)
 class TransferRow:
+    """One algorithm and experiment on the true twin: with the gains tuned on the identified twin
+    and with those tuned on the true one."""
+
     axis: str
     algorithm: str
     experiment: str
@@ -43,22 +46,29 @@ class TransferRow:
 
     @property
     def gap_e_max(self) -> float:
+        """Relative e_max gap of the identified-twin gains to the true-twin gains (inf if
+        undefined)."""
         return self._gap(self.e_max_identified, self.e_max_true)
 
     @property
     def gap_rmse(self) -> float:
+        """Relative RMSE gap of the identified-twin gains to the true-twin gains (inf if
+        undefined)."""
         return self._gap(self.rmse_identified, self.rmse_true)
 
     @property
     def within(self) -> bool:
+        """Are both gaps within :data:`TRANSFER_TOLERANCE`?"""
         return max(self.gap_e_max, self.gap_rmse) <= TRANSFER_TOLERANCE
 
     def to_dict(self) -> dict[str, Any]:
+        """The row as plain data, with the gaps."""
         d = dict(self.__dict__)
         d.update(gap_e_max=self.gap_e_max, gap_rmse=self.gap_rmse, within=self.within)
         return d
 
     def markdown(self) -> str:
+        """The row as a line of the Markdown table under :data:`HEADER`."""
         return (
             f"| {self.axis} | {self.algorithm} | {self.experiment} | {self.e_max_identified:.3f} / "
             f"{self.e_max_true:.3f} {self.unit} | {100 * self.gap_e_max:+.1f} % | "

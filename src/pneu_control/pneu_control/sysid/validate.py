@@ -51,6 +51,9 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
 
 @dataclass
 class BagValidation:
+    """The validation of one bag: the fit % per signal in ``mode``, the sensor offsets, and the
+    traces behind them."""
+
     bag: str
     mode: str
     fits: dict[str, float]  # signal -> fit %
@@ -62,6 +65,7 @@ class BagValidation:
     yhat: dict[str, np.ndarray] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """The validation as plain data (the traces left out)."""
         return {
             "bag": self.bag,
             "mode": self.mode,
@@ -201,6 +205,7 @@ def plot_validation(v: BagValidation, out_png: str | Path) -> Path:
 
 
 def write_report(results: list[BagValidation], out_json: str | Path) -> None:
+    """validate.json: the validations as a JSON list."""
     Path(out_json).write_text(
         json.dumps([replace(r).to_dict() for r in results], indent=2, sort_keys=True) + "\n"
     )

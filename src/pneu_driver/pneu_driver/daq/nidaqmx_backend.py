@@ -57,7 +57,7 @@ its last value.
 What the card does when this process cannot run ``close`` (killed, crashed,
 hung): M Series AO keep their last value and the DO line its last level; after
 a device reset or power-up the AO go to 0 V -- a fully open MPYE. Only the
-external interlock on the heartbeat makes that safe (README, "Safety on the
+external interlock on the heartbeat makes that safe (docs/rig.md, "Safety on the
 real rig").
 """
 
@@ -153,6 +153,27 @@ def visible_devices(device: str = "Dev1") -> list[str]:
         ) from err
 
 
+def _open_failure(errors: Any, dev: str, step: str, err: Exception) -> Exception:
+    """The error :meth:`NidaqmxBackend.open` raises for a DAQmx error at ``step``."""
+    if isinstance(err, errors.DaqNotFoundError):
+        return DaqUnavailableError(
+            dev, (), f"NI-DAQmx driver not found ({err}); cannot open DAQ device {dev!r}"
+        )
+    if isinstance(err, errors.DaqFunctionNotSupportedError):
+        return DaqSetupError(
+            f"{dev}: {step} failed: {_first_line(err)} (set loop.report_missed_samples: false "
+            "to run without it; late cycles then read stale samples unreported)"
+        )
+    hint = ""
+    if (
+        err.error_code == -200842
+        or "HW_TIMED" in str(err).upper()
+        or "single point" in str(err).lower()
+    ):
+        hint = " (if the device cannot time this channel type in HW-timed single point, set loop.ci_timing / loop.ao_timing: on_demand or loop.timing: software)"
+    return DaqSetupError(f"{dev}: {step} failed: DAQmx {err.error_code}: {_first_line(err)}{hint}")
+
+
 class NidaqmxBackend:
     """The rig: AI ×4 (pressures, laser), CI angular encoder (X4), AO ×2 (valves).
 
@@ -192,121 +213,145 @@ class NidaqmxBackend:
         names = visible_devices(dev)
         if dev not in names:
             raise DaqUnavailableError(dev, names)
-        c = nidaqmx.constants
-        hwtsp = c.AcquisitionType.HW_TIMED_SINGLE_POINT
-        clock = f"/{dev}/ai/SampleClock"
+        errors = nidaqmx.errors
         step = "writing the safe value"
         try:
             self._write_safe_on_demand()
             step = "creating the AI task"
-            ai = self._new_task()
-            for name in AI_SENSORS:
-                ai.ai_channels.add_ai_voltage_chan(
-                    self._phys(getattr(rig.channels, name)),
-                    name,
-                    terminal_config=c.TerminalConfiguration[getattr(rig.ai.terminal, name)],
-                    min_val=rig.ai.min_v,
-                    max_val=rig.ai.max_v,
-                )
-            if self.hardware_paced:
-                ai.timing.cfg_samp_clk_timing(rig.loop.rate_hz, source="", sample_mode=hwtsp)
-                if rig.loop.report_missed_samples:
-                    step = "enabling missed-sample reporting (DAQmx_RealTime_ReportMissedSamp)"
-                    set_report_missed_samp(nidaqmx, ai, True)
-                    # from the first cycle: a late read NI's warm-up let pass would shift
-                    # every later sample index (and trip the encoder-jump rule)
-                    set_warmup_iterations(nidaqmx, ai, 0)
+            ai = self._open_ai()
+            if self.hardware_paced and rig.loop.report_missed_samples:
+                step = "enabling missed-sample reporting (DAQmx_RealTime_ReportMissedSamp)"
+                set_report_missed_samp(nidaqmx, ai, True)
+                # from the first cycle: a late read NI's warm-up let pass would shift
+                # every later sample index (and trip the encoder-jump rule)
+                set_warmup_iterations(nidaqmx, ai, 0)
             step = "creating the encoder (CI) task"
-            ci = self._new_task()
-            chan = ci.ci_channels.add_ci_ang_encoder_chan(
-                self._phys(rig.channels.encoder),
-                "encoder",
-                decoding_type=c.EncoderType["X_" + rig.encoder.decoding[1:]],
-                zidx_enable=False,
-                units=c.AngleUnits.TICKS,
-                pulses_per_rev=rig.encoder.ppr,
-                initial_angle=0.0,
-            )
-            width = DIG_FILTERS[rig.encoder.dig_filter]
-            for phase in ("a", "b"):  # DAQmx coerces the width to a setting the device has
-                setattr(chan, f"ci_encoder_{phase}_input_dig_fltr_enable", width > 0.0)
-                if width > 0.0:
-                    setattr(chan, f"ci_encoder_{phase}_input_dig_fltr_min_pulse_width", width)
-            if self._ci_clocked:
-                chan.ci_data_xfer_mech = (
-                    c.DataTransferActiveTransferMode.POLLED
-                )  # HWTSP counters need programmed I/O
-                ci.timing.cfg_samp_clk_timing(rig.loop.rate_hz, source=clock, sample_mode=hwtsp)
+            ci = self._open_ci()
             step = "creating the valve (AO) task"
-            ao = self._new_task()
-            for name, channel in (
-                ("valve_linear", rig.channels.valve_linear),
-                ("valve_rotary", rig.channels.valve_rotary),
-            ):
-                ao.ao_channels.add_ao_voltage_chan(
-                    self._phys(channel), name, min_val=rig.ao.min_v, max_val=rig.ao.max_v
-                )
-            if self._ao_clocked:
-                ao.timing.cfg_samp_clk_timing(rig.loop.rate_hz, source=clock, sample_mode=hwtsp)
-            self._ai_reader = nidaqmx.stream_readers.AnalogMultiChannelReader(ai.in_stream)
-            self._ci_reader = nidaqmx.stream_readers.CounterReader(ci.in_stream)
-            self._writer = nidaqmx.stream_writers.AnalogMultiChannelWriter(
-                ao.out_stream, auto_start=False
-            )
-            for rw in (self._ai_reader, self._ci_reader, self._writer):
-                rw.verify_array_shape = False  # one driver query less per call
+            ao = self._open_ao()
+            self._open_streams(ai, ci, ao)
             if rig.heartbeat.enabled:
                 step = f"creating the heartbeat (DO) task on {rig.heartbeat.line}"
-                do = self._new_task()
-                do.do_channels.add_do_chan(
-                    self._phys(rig.heartbeat.line),
-                    "heartbeat",
-                    line_grouping=c.LineGrouping.CHAN_PER_LINE,
-                )
-                self._do_writer = nidaqmx.stream_writers.DigitalSingleChannelWriter(
-                    do.out_stream, auto_start=False
-                )
-                self._do_writer.verify_array_shape = False
-                do.start()  # on demand: each write sets the line at once
-                self._do_writer.write_one_sample_one_line(False, timeout=self._timeout)
-            self._ao_buf[:] = rig.ao.safe_v
-            try:  # the first value of the timed AO task: safe (the on-demand write already set it)
-                self._writer.write_one_sample(self._ao_buf, timeout=self._timeout)
-            except nidaqmx.errors.DaqError as err:
-                log.warning(
-                    "%s: pre-start AO write refused (DAQmx %s); the on-demand safe value holds",
-                    dev,
-                    err.error_code,
-                )
+                self._open_heartbeat()
+            self._write_first_safe()
             step = "starting the tasks"
             ci.start()
             ao.start()
             ai.start()  # the master clock last
-        except nidaqmx.errors.DaqNotFoundError as err:
+        except (
+            errors.DaqNotFoundError,
+            errors.DaqFunctionNotSupportedError,
+            errors.DaqError,
+        ) as err:
             self._abort()
-            raise DaqUnavailableError(
-                dev, (), f"NI-DAQmx driver not found ({err}); cannot open DAQ device {dev!r}"
-            ) from err
-        except nidaqmx.errors.DaqFunctionNotSupportedError as err:
-            self._abort()
-            raise DaqSetupError(
-                f"{dev}: {step} failed: {_first_line(err)} (set loop.report_missed_samples: false "
-                "to run without it; late cycles then read stale samples unreported)"
-            ) from err
-        except nidaqmx.errors.DaqError as err:
-            self._abort()
-            hint = ""
-            if (
-                err.error_code == -200842
-                or "HW_TIMED" in str(err).upper()
-                or "single point" in str(err).lower()
-            ):
-                hint = " (if the device cannot time this channel type in HW-timed single point, set loop.ci_timing / loop.ao_timing: on_demand or loop.timing: software)"
-            raise DaqSetupError(
-                f"{dev}: {step} failed: DAQmx {err.error_code}: {_first_line(err)}{hint}"
-            ) from err
+            raise _open_failure(errors, dev, step, err) from err
         self._counts = 0
         self.is_open = True
+
+    def _open_ai(self) -> Any:
+        """The AI task (four sensors); HW-timed single point at the loop rate when hardware-paced."""
+        rig, c = self.rig, self._nidaqmx.constants
+        ai = self._new_task()
+        for name in AI_SENSORS:
+            ai.ai_channels.add_ai_voltage_chan(
+                self._phys(getattr(rig.channels, name)),
+                name,
+                terminal_config=c.TerminalConfiguration[getattr(rig.ai.terminal, name)],
+                min_val=rig.ai.min_v,
+                max_val=rig.ai.max_v,
+            )
+        if self.hardware_paced:
+            ai.timing.cfg_samp_clk_timing(
+                rig.loop.rate_hz, source="", sample_mode=c.AcquisitionType.HW_TIMED_SINGLE_POINT
+            )
+        return ai
+
+    def _open_ci(self) -> Any:
+        """The encoder task (angular, X1/X2/X4, digital filter); on the AI clock if clocked."""
+        rig, c = self.rig, self._nidaqmx.constants
+        ci = self._new_task()
+        chan = ci.ci_channels.add_ci_ang_encoder_chan(
+            self._phys(rig.channels.encoder),
+            "encoder",
+            decoding_type=c.EncoderType["X_" + rig.encoder.decoding[1:]],
+            zidx_enable=False,
+            units=c.AngleUnits.TICKS,
+            pulses_per_rev=rig.encoder.ppr,
+            initial_angle=0.0,
+        )
+        width = DIG_FILTERS[rig.encoder.dig_filter]
+        for phase in ("a", "b"):  # DAQmx coerces the width to a setting the device has
+            setattr(chan, f"ci_encoder_{phase}_input_dig_fltr_enable", width > 0.0)
+            if width > 0.0:
+                setattr(chan, f"ci_encoder_{phase}_input_dig_fltr_min_pulse_width", width)
+        if self._ci_clocked:
+            chan.ci_data_xfer_mech = (
+                c.DataTransferActiveTransferMode.POLLED
+            )  # HWTSP counters need programmed I/O
+            ci.timing.cfg_samp_clk_timing(
+                rig.loop.rate_hz,
+                source=f"/{rig.device}/ai/SampleClock",
+                sample_mode=c.AcquisitionType.HW_TIMED_SINGLE_POINT,
+            )
+        return ci
+
+    def _open_ao(self) -> Any:
+        """The valve task (two AO channels); on the AI clock if clocked."""
+        rig, c = self.rig, self._nidaqmx.constants
+        ao = self._new_task()
+        for name, channel in (
+            ("valve_linear", rig.channels.valve_linear),
+            ("valve_rotary", rig.channels.valve_rotary),
+        ):
+            ao.ao_channels.add_ao_voltage_chan(
+                self._phys(channel), name, min_val=rig.ao.min_v, max_val=rig.ao.max_v
+            )
+        if self._ao_clocked:
+            ao.timing.cfg_samp_clk_timing(
+                rig.loop.rate_hz,
+                source=f"/{rig.device}/ai/SampleClock",
+                sample_mode=c.AcquisitionType.HW_TIMED_SINGLE_POINT,
+            )
+        return ao
+
+    def _open_streams(self, ai: Any, ci: Any, ao: Any) -> None:
+        """The stream readers and the writer the loop calls every cycle."""
+        nidaqmx = self._nidaqmx
+        self._ai_reader = nidaqmx.stream_readers.AnalogMultiChannelReader(ai.in_stream)
+        self._ci_reader = nidaqmx.stream_readers.CounterReader(ci.in_stream)
+        self._writer = nidaqmx.stream_writers.AnalogMultiChannelWriter(
+            ao.out_stream, auto_start=False
+        )
+        for rw in (self._ai_reader, self._ci_reader, self._writer):
+            rw.verify_array_shape = False  # one driver query less per call
+
+    def _open_heartbeat(self) -> None:
+        """The heartbeat DO line, on demand, started low."""
+        rig, c = self.rig, self._nidaqmx.constants
+        do = self._new_task()
+        do.do_channels.add_do_chan(
+            self._phys(rig.heartbeat.line),
+            "heartbeat",
+            line_grouping=c.LineGrouping.CHAN_PER_LINE,
+        )
+        self._do_writer = self._nidaqmx.stream_writers.DigitalSingleChannelWriter(
+            do.out_stream, auto_start=False
+        )
+        self._do_writer.verify_array_shape = False
+        do.start()  # on demand: each write sets the line at once
+        self._do_writer.write_one_sample_one_line(False, timeout=self._timeout)
+
+    def _write_first_safe(self) -> None:
+        """The first value of the timed AO task: safe (the on-demand write already set it)."""
+        self._ao_buf[:] = self.rig.ao.safe_v
+        try:
+            self._writer.write_one_sample(self._ao_buf, timeout=self._timeout)
+        except self._nidaqmx.errors.DaqError as err:
+            log.warning(
+                "%s: pre-start AO write refused (DAQmx %s); the on-demand safe value holds",
+                self.rig.device,
+                err.error_code,
+            )
 
     def _new_task(self) -> Any:
         task = self._nidaqmx.Task()

@@ -253,7 +253,7 @@ class HeartbeatParams:
 
     The relay (in series with the e-stop) holds the supply air on while it sees
     edges; a hung, killed or stopped loop, or a tripped supervisor, leaves the
-    line still and the relay drops the supply (README, "Safety on the real rig").
+    line still and the relay drops the supply (docs/rig.md, "Safety on the real rig").
     """
 
     enabled: bool = param(True, desc="toggle the line every cycle", read_only=True)

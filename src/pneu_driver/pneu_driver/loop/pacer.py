@@ -49,10 +49,10 @@ class Timing:
     def summary(self, prefix: str, last: int | None = None) -> dict[str, str]:
         """``{prefix_p50_us, prefix_p99_us, prefix_max_us, prefix_n}`` as strings (diagnostics).
 
-        Percentiles over the ``last`` ticks (None: the whole ring). Over a full ring of 60,000
-        they cost ~1.7 ms per Timing (measured): a 1 Hz diagnostics callback on the executor
-        thread that took 5 ms held up the commands behind it long enough for the supervisor's
-        5 ms command watchdog, so periodic reports use the last second.
+        Percentiles over the ``last`` ticks (None: the whole ring). Over a full ring they cost
+        milliseconds: a 1 Hz diagnostics callback on the executor thread that also takes the
+        commands can hold them up past the supervisor's command watchdog, so periodic reports
+        use the last second (the benchmarks in ``bench/`` measure the costs).
         """
         v = self.values(last)
         p50, p99 = (np.percentile(v, (50, 99)) * 1e-3) if v.size else (float("nan"),) * 2

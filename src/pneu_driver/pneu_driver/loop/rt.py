@@ -39,7 +39,7 @@ def enable_realtime(
     waiting for the GIL asks its holder to drop it only after the switch
     interval (Python's default 5 ms), so a busy executor thread can hold the
     loop off a whole sample clock or five. ``freeze_gc``: every object alive now
-    (modules, rclpy, numpy: ~10^5) leaves the cyclic collector (:func:`gc.freeze`),
+    (modules, rclpy, numpy) leaves the cyclic collector (:func:`gc.freeze`),
     so a full collection -- which walks them all, milliseconds -- cannot stall a tick.
     """
     notes: list[str] = []

@@ -59,6 +59,55 @@ class DriverNode(ShellDefaults, Node):
         super().__init__("pneu_driver", **node_kwargs)
         self.hosts: tuple = ()
         self.crashed: dict[str, str] = {}
+        self._declare_shell_parameters()
+        axes = self.get_parameter("axes").value
+        choices = {"linear": ("linear",), "rotary": ("rotary",), "both": AXES, "none": ()}
+        if axes not in choices:
+            raise ParamError("axes", axes, "one of " + ", ".join(choices))
+        rig = load_rig_params(self.get_parameter("rig_file").value or None)
+        safety = load_safety_params(self.get_parameter("safety_file").value or None)
+        backend = self.get_parameter("backend").value
+        if backend_kind(backend) == "nidaqmx":
+            seen = visible_devices(rig.device)  # DaqUnavailableError without the NI driver
+            if rig.device not in seen:
+                from pneu_driver.daq.errors import DaqUnavailableError
+
+                raise DaqUnavailableError(rig.device, seen)
+        from pneu_driver.safety import SafetySupervisor
+
+        self._create_publishers()
+        self.loop = DriverLoop(
+            make_backend(backend, rig),
+            rig,
+            SafetySupervisor(safety, sample_time_s=rig.period_s),
+            on_sample=self._publish_sample,  # loop thread
+            on_events=self._queue_events,  # loop thread
+            expected_axes=choices[axes],
+            epoch_ns=self.get_clock().now().nanoseconds + rig.period_ns,  # stamps on the ROS clock
+        )
+        for a in () if hosted else AXES:
+            self.create_subscription(
+                JointState,
+                VALVE_COMMAND_TOPIC[a],
+                lambda data, a=a: self._on_command(data, a),  # raw bytes, one argument
+                to_rclpy(sub_qos_for(VALVE_COMMAND_TOPIC[a], "realtime"), rq),
+                raw=True,
+            )
+        self.create_service(Trigger, "~/estop", self._on_estop)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(1.0, self._diagnostics, clock=steady)
+        self.create_timer(0.1, self._publish_events, clock=steady)
+        self.done = Future()
+        self.events: collections.deque = collections.deque(maxlen=10000)
+        self.stamp_offset_ns: int | None = None
+        self.thread: threading.Thread | None = None
+        self.device = (
+            rig.device if backend_kind(backend) == "nidaqmx" else f"{backend} ({rig.device})"
+        )
+
+    def _declare_shell_parameters(self) -> None:
+        """rig_file, safety_file, backend, axes: read-only, read once at start."""
         ro = {"read_only": True}
         self.declare_parameter(
             "rig_file",
@@ -93,21 +142,9 @@ class DriverNode(ShellDefaults, Node):
                 **ro,
             ),
         )
-        axes = self.get_parameter("axes").value
-        choices = {"linear": ("linear",), "rotary": ("rotary",), "both": AXES, "none": ()}
-        if axes not in choices:
-            raise ParamError("axes", axes, "one of " + ", ".join(choices))
-        rig = load_rig_params(self.get_parameter("rig_file").value or None)
-        safety = load_safety_params(self.get_parameter("safety_file").value or None)
-        backend = self.get_parameter("backend").value
-        if backend_kind(backend) == "nidaqmx":
-            seen = visible_devices(rig.device)  # DaqUnavailableError without the NI driver
-            if rig.device not in seen:
-                from pneu_driver.daq.errors import DaqUnavailableError
 
-                raise DaqUnavailableError(rig.device, seen)
-        from pneu_driver.safety import SafetySupervisor
-
+    def _create_publishers(self) -> None:
+        """The sensor topics (and their wire encoder) and /diagnostics."""
         self.wire = SensorWire()
         self.cmd_wire = {a: CommandWire(a) for a in AXES}
         self.pubs = {
@@ -120,35 +157,6 @@ class DriverNode(ShellDefaults, Node):
         }
         self.diag_pub = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
-        )
-        self.loop = DriverLoop(
-            make_backend(backend, rig),
-            rig,
-            SafetySupervisor(safety, sample_time_s=rig.period_s),
-            on_sample=self._publish_sample,  # loop thread
-            on_events=self._queue_events,  # loop thread
-            expected_axes=choices[axes],
-            epoch_ns=self.get_clock().now().nanoseconds + rig.period_ns,  # stamps on the ROS clock
-        )
-        for a in () if hosted else AXES:
-            self.create_subscription(
-                JointState,
-                VALVE_COMMAND_TOPIC[a],
-                lambda data, a=a: self._on_command(data, a),  # raw bytes, one argument
-                to_rclpy(sub_qos_for(VALVE_COMMAND_TOPIC[a], "realtime"), rq),
-                raw=True,
-            )
-        self.create_service(Trigger, "~/estop", self._on_estop)
-        self.create_service(Trigger, "~/reset", self._on_reset)
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(1.0, self._diagnostics, clock=steady)
-        self.create_timer(0.1, self._publish_events, clock=steady)
-        self.done = Future()
-        self.events: collections.deque = collections.deque(maxlen=10000)
-        self.stamp_offset_ns: int | None = None
-        self.thread: threading.Thread | None = None
-        self.device = (
-            rig.device if backend_kind(backend) == "nidaqmx" else f"{backend} ({rig.device})"
         )
 
     def start(self) -> None:

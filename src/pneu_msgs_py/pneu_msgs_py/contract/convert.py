@@ -304,7 +304,7 @@ def _typestore() -> Any:
 
 
 def typestore_messages() -> Any:
-    """The rosbags Jazzy typestore (for tests and offline tools)."""
+    """The rosbags Jazzy typestore, created once on first use (one instance for every user)."""
     return _typestore()
 
 

@@ -1,10 +1,10 @@
 """Our topics as raw CDR bytes, without rclpy: what the nodes publish and take at 1 kHz.
 
 rclpy turns a message object into CDR (and back) in Python-to-C conversions
-that cost tens of microseconds per message; publishing pre-serialised
+that are most of a message's cost; publishing pre-serialised
 ``bytes`` and taking ``raw=True`` subscriptions skips them (DESIGN §10). The
 bytes are exactly those rclpy would produce (same layouts as the bag writer,
-:mod:`pneu_msgs_py.bag.cdr`, tested against rosbags' and mcap_ros2's
+:mod:`pneu_msgs_py.contract.cdr`, tested against rosbags' and mcap_ros2's
 serialisers), so raw and deserialising nodes talk to each other freely.
 
 - :class:`WireCodec` -- one fixed layout: :meth:`~WireCodec.encode` a stamp and
@@ -23,7 +23,7 @@ import math
 import struct
 from collections.abc import Sequence
 
-from pneu_msgs_py.bag.cdr import (
+from pneu_msgs_py.contract.cdr import (
     CdrDecodeError,
     FixedLayout,
     clock_layout,

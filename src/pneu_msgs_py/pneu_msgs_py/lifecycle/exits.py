@@ -1,4 +1,4 @@
-"""Exit codes of every ``pneu`` command (the README's table is generated from :data:`EXIT_CODES`)."""
+"""Exit codes of every ``pneu`` command (docs/cli.md's table is checked against :data:`EXIT_CODES`)."""
 
 from __future__ import annotations
 

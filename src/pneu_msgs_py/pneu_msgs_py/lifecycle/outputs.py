@@ -1,6 +1,6 @@
 """Outputs claimed before anything is written: never reused silently, never an input, never half-written.
 
-The rules (every command that writes follows them, the README repeats them):
+The rules (every command that writes follows them, docs/cli.md repeats them):
 
 1. **Checked first.** :meth:`OutputDir.check` / :meth:`OutputFile.check` run with
    the other input checks, before anything is created: a directory that holds

@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from pneu_msgs_py.bag.schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, msgdef
-from pneu_msgs_py.contract.convert import DiagStatus, _typestore, diagnostics_to_typestore
+from pneu_msgs_py.contract.convert import DiagStatus, diagnostics_to_typestore, typestore_messages
 from pneu_msgs_py.contract.samples import AXES, SensorSample
 from pneu_msgs_py.contract.topics import (
     CONTROLLER_STATE_TOPIC,
@@ -190,7 +190,9 @@ class LiveServer:
         ch = self._channels[DIAGNOSTICS_TOPIC]
         if ch.has_sinks():
             msg = diagnostics_to_typestore(stamp_ns, statuses)
-            data = bytes(_typestore().serialize_cdr(msg, "diagnostic_msgs/msg/DiagnosticArray"))
+            data = bytes(
+                typestore_messages().serialize_cdr(msg, "diagnostic_msgs/msg/DiagnosticArray")
+            )
             ch.log(data, log_time=stamp_ns)
 
     def _pace(self, stamp_ns: int) -> None:

@@ -142,7 +142,7 @@ def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | No
         node.get_logger().info(f"executor: {used}")
         for n in nodes:
             executor.add_node(n)
-        # what start-up made (rclpy, numpy, the cores: ~1e5 objects) leaves the cyclic
+        # what start-up made (rclpy, numpy, the cores: every object alive now) leaves the cyclic
         # collector, so a full collection at a random callback does not walk it all
         # (milliseconds; the realtime loops do the same: pneu_driver.loop.rt)
         gc.collect()

@@ -1,0 +1,178 @@
+"""A task from file to results: checks, the run spec, the run, the report and the figure.
+
+:func:`prepare` checks everything before anything is written (the task file, the
+plant, the controllers with the task's overrides, the supervisor's parameters);
+:func:`execute_task` runs it on the twin through the experiment session (one bag,
+``metrics.json``, ``timeseries.npz``) and writes ``task_report.json``,
+``task_report.md`` and ``task.png`` beside them.
+
+The rotary axis of a task is always in ``rotary_control: angle``. Its algorithm, when
+the task names none: ``coast`` with the paper's plumbing (one-way drive), the angle
+laws of :data:`BIDIRECTIONAL_ROTARY` with the bidirectional one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.duration import MAX_DURATION_S
+from pneu_msgs_py.lifecycle.outputs import OutputDir
+from pneu_msgs_py.params.core import ParamError, with_updates
+from pneu_msgs_py.params.yaml_file import from_option
+
+from pneu_control.controller.params import load_controller_params
+from pneu_control.experiment.runner import RunResult, RunSpec
+from pneu_control.task.program import TaskProgram, load_task
+from pneu_control.task.runner import SAFE_TAIL_S, TaskDriver
+
+__all__ = [
+    "ARTEFACTS",
+    "BIDIRECTIONAL_ROTARY",
+    "PreparedTask",
+    "execute_task",
+    "prepare",
+]
+
+ARTEFACTS = ("run.mcap", "metrics.json", "timeseries.npz")
+REPORTS = ("task_report.json", "task_report.md", "task.png")
+
+# the rotary angle loop with the bidirectional plumbing (the valve drives both ways): LADRC
+# on θ (°). Estimated on the twin: b0 from the open-loop torque per volt (≈ 1e5 °/s²/V at
+# small openings), controller bandwidth 25 1/s and observer 150 rad/s (ω0 ≈ 6 ω_c), the
+# TD's r bounding the reference acceleration (°/s²); docs/composite-motion.md has the figures.
+BIDIRECTIONAL_ROTARY: dict[str, Any] = {
+    "algorithm": "ladrc",
+    "ladrc.lambda_1": 25.0,
+    "ladrc.omega_0": 150.0,
+    "ladrc.b_0": 100000.0,
+    "td.r": 200000.0,
+}
+
+
+@dataclass(frozen=True)
+class PreparedTask:
+    """A checked task and the run that carries it out."""
+
+    program: TaskProgram
+    spec: RunSpec
+
+
+def prepare(
+    task_file: str | Path,
+    *,
+    plant_file: str | Path | None = None,
+    controllers_file: str | Path | None = None,
+    safety_file: str | Path | None = None,
+    seed: int = 0,
+    plumbing: str | None = None,
+    name: str | None = None,
+) -> PreparedTask:
+    """Check ``task_file`` against the plant, controllers and supervisor it will run with."""
+    from pneu_driver.safety import load_safety_params
+    from pneu_sim.physics.plant_file import load_plant
+
+    from pneu_control.experiment.session import check_seed
+
+    check_seed(seed)
+    with from_option("--plant" if plant_file else None):
+        plant = load_plant(plant_file)
+    with from_option("--safety" if safety_file else None):
+        safety = load_safety_params(safety_file)
+    if plumbing is not None and plumbing not in ("paper", "bidirectional"):
+        raise ParamError("--plumbing", plumbing, "paper or bidirectional")
+    base_plumbing = plumbing or getattr(plant.rotary, "plumbing", "paper")
+    program = load_task(task_file, safety=safety, plant_plumbing=base_plumbing)
+    effective = plumbing or program.plumbing or base_plumbing
+    updates: dict[str, Any] = (
+        {"rotary.plumbing": effective} if hasattr(plant.rotary, "plumbing") else {}
+    )
+    updates.update({_load_key(k): v for k, v in program.loads.items()})
+    try:
+        plant = with_updates(plant, updates)
+    except ParamError as err:
+        raise ParamError(f"{program.source}: loads: {err.key}", err.value, err.allowed) from None
+    controllers = {}
+    for axis in ("linear", "rotary"):
+        overrides = dict(program.controllers.get(axis, {}))
+        if axis == "rotary":
+            defaults = {"algorithm": "coast"} if effective == "paper" else BIDIRECTIONAL_ROTARY
+            if "algorithm" in overrides:
+                defaults = {}
+            overrides = {**defaults, **overrides, "rotary_control": "angle"}
+            overrides.setdefault("rotary_model", "speed")
+        overrides.setdefault("reference.kind", "constant")
+        overrides.setdefault("reference.value", 0.0)
+        with from_option("--controllers" if controllers_file else None):
+            load_controller_params(axis, controllers_file)
+        try:
+            params = load_controller_params(axis, controllers_file, overrides)
+            from pneu_control.controller.axis import AxisController
+
+            AxisController(axis, params)  # what only the axis knows (angle-mode algorithms)
+        except ParamError as err:
+            raise ParamError(
+                f"{program.source}: controllers.{axis}.{err.key}", err.value, err.allowed
+            ) from None
+        controllers[axis] = params
+    duration = min(program.planned_s + SAFE_TAIL_S + 0.01, MAX_DURATION_S)
+    if program.planned_s + SAFE_TAIL_S > MAX_DURATION_S:
+        raise ParamError(
+            f"{program.source}: segments",
+            f"{program.planned_s:.6g} s of timeouts",
+            f"at most {MAX_DURATION_S - SAFE_TAIL_S:g} s in all (the duration cap of a run)",
+        )
+    spec = RunSpec(
+        axes=("linear", "rotary"),
+        controllers=controllers,
+        plant=plant,
+        duration_s=duration,
+        seed=seed,
+        name=name or program.name,
+        safety=safety,
+    )
+    return PreparedTask(program, spec)
+
+
+def _load_key(key: str) -> str:
+    return key if key.startswith("load.") else f"load.{key}"
+
+
+def execute_task(
+    prepared: PreparedTask, out_dir: str | Path, *, overwrite: bool = False, progress: bool = False
+) -> tuple[TaskDriver, RunResult, dict[str, Any]]:
+    """Run the task on the twin into ``out_dir``; returns (driver, result, report)."""
+    from pneu_control.experiment import session
+    from pneu_control.task.report import (
+        path_errors,
+        report_dict,
+        report_markdown,
+        task_figure,
+        write_json,
+    )
+
+    claim = OutputDir(out_dir, (*ARTEFACTS, *REPORTS), overwrite=overwrite).check()
+    spec = prepared.spec
+    p = spec.plant
+    driver = TaskDriver(prepared.program, A_c1=p.linear.A_c1, A_c2=p.linear.A_c2, p_a=p.ambient.p_a)
+    result = session.execute(spec, claim, progress=progress, hook=driver)
+    if result.interrupted:
+        driver.interrupted(float(result.t[-1]) if len(result.t) else 0.0)
+    path_errors(driver, result)
+    rep = report_dict(driver, result)
+    rep["end"] = result.end
+    reports = OutputDir(out_dir, REPORTS, overwrite=True)
+    with signals.deferred(), reports:
+        write_json(reports.partial("task_report.json"), rep)
+        reports.partial("task_report.md").write_text(report_markdown(rep), encoding="utf-8")
+        task_figure(reports.partial("task.png"), driver, result)
+        reports.publish(*REPORTS)
+    return driver, result, rep
+
+
+def with_seed(prepared: PreparedTask, seed: int) -> PreparedTask:
+    """The same task on another seed (noise draws)."""
+    return PreparedTask(prepared.program, dataclasses.replace(prepared.spec, seed=seed))
