@@ -9,8 +9,8 @@ from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus, ValveCurve
 from pneu_control.controller.params import load_controller_params
 from pneu_control.observers.eso import eso_gains
 from pneu_control.observers.eso_chain import ChainEso, chain_gains, chain_matrices
+from pneu_msgs_py.contract.valve_chart import MPYE_DU_V, MPYE_FLOW
 from pneu_msgs_py.params.core import ParamError, with_updates
-from pneu_sim.physics.params import MPYE_DU_V, MPYE_FLOW
 
 T = 0.001
 
@@ -74,7 +74,7 @@ def test_surface_integral_is_the_measured_angle_error():
     alg = EsoSmcPlus(params, "rotary")
     alg.start(StepInput(y=800.0, r=800.0, theta=0.0), None, (math.nan,) * 3)
     # the motor lags the reference by exactly 10 rpm·s of angle at the reference speed
-    alg.z1, alg.z2, alg.z3, alg.z4 = -10.0, 800.0, 0.0, 0.0
+    alg.st.z1, alg.st.z2, alg.st.z3, alg.st.z4 = -10.0, 800.0, 0.0, 0.0
     # exactly the prediction: no innovation
     alg.update(StepInput(y=800.0, r=800.0, theta=-10.0 + 800.0 * T))
     assert alg.s == pytest.approx(30.0**2 * 10.0, rel=1e-3)

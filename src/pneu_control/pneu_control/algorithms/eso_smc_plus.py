@@ -123,317 +123,475 @@ predicted over the transport delay with the commands already sent.
 
 Units: mm (linear) or rpm / rpm·s (rotary); λ 1/s; b0 (mm|rpm)/s²/V;
 ε (mm|rpm)/s²; commands V (deviation from 5 V).
+
+The step is written once, as kernels on records (docs/design.md §11):
+:func:`plus_start`, :func:`plus_update`, :func:`plus_hint` on
+:data:`ESO_SMC_PLUS_CONSTANTS`, :data:`ESO_SMC_PLUS_STATE` and the valve chart
+(:mod:`.valve_curve`, rows du and flow); :class:`EsoSmcPlus` and the compiled loop
+call the same functions.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from pneu_control.algorithms.base import StepInput
+from pneu_msgs_py.params.records import RecordType, kernel
+
+from pneu_control.algorithms.base import MAX_HISTORY, AlgorithmKernel, KernelAlgorithm
 from pneu_control.algorithms.eso_smc_plus_params import EsoSmcPlusParams
 from pneu_control.algorithms.smc import conditional_integral, sat
-from pneu_control.algorithms.valve_curve import IDENTITY, ValveCurve
+from pneu_control.algorithms.valve_curve import (
+    VALVE_FIELDS,
+    ValveCurve,
+    to_linear,
+    to_valve,
+    valve_constants,
+    valve_table,
+)
 from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predict3
 from pneu_control.observers.eso_chain import chain_gains, eso4_step, predict4
 
 if TYPE_CHECKING:
     from pneu_control.controller.params import AxisControllerParams
 
-__all__ = ["EsoSmcPlus", "EsoSmcPlusParams", "ValveCurve"]
+__all__ = [
+    "ESO_SMC_PLUS_CONSTANTS",
+    "ESO_SMC_PLUS_STATE",
+    "EsoSmcPlus",
+    "EsoSmcPlusParams",
+    "ValveCurve",
+    "plus_start",
+    "plus_update",
+]
 
-_NAN = float("nan")
+NAN = math.nan
+
+# Units: mm, rpm, rpm·s as in the module docstring; SI (N, m, Pa) in the force cascade.
+ESO_SMC_PLUS_CONSTANTS = RecordType(
+    "EsoSmcPlusConstants",
+    [
+        ("T", "f"), ("T2h", "f"), ("T3s", "f"),  # T, T²/2, T³/6
+        ("c1", "f"), ("c2", "f"), ("b0", "f"), ("eps", "f"), ("delta", "f"), ("k", "f"),
+        # observer gains: linear / speed l1..l3 (observers.eso), angle l1..l4 (eso_chain)
+        ("l1", "f"), ("l2", "f"), ("l3", "f"), ("l4", "f"),
+        # force cascade (linear_model force) and the Eq. 2 friction
+        ("A_c1", "f"), ("A_c2", "f"), ("F_0", "f"), ("M_k", "f"), ("inv_M_k", "f"),
+        ("A_f", "f"), ("c_v_k", "f"), ("inv_vs", "f"), ("k_F", "f"), ("inv_bF", "f"),
+        ("nA1s", "f"), ("nA2s", "f"), ("V1_0", "f"), ("V2_0", "f"), ("b_F", "f"),
+        # valve limits (deviation and linearised), delay
+        ("u_n", "f"), ("lo", "f"), ("hi", "f"), ("v_lo", "f"), ("v_hi", "f"), ("tau", "f"),
+        *VALVE_FIELDS,  # the valve map (valve_curve), read with the table
+        # options: angle observer, rotary_model angle inputs, no valve map, force cascade,
+        # friction feed-forward, delay compensation; ff pipe length d + 1
+        ("angle", "i"), ("angle_inputs", "i"), ("lin_id", "i"), ("force", "i"), ("ffw", "i"),
+        ("dc", "i"), ("n_ff", "i"),
+    ],
+)  # fmt: skip
+
+# linear (z1, z2, z3) = (x, ẋ, f); rotary angle (z1..z4) = (θ, ω, ω̇, f); th_r: reference
+# angle (rpm·s); v_in: linearised command on the valve last period; F_p (N), a_in (mm/s²):
+# the force cascade's measured force and known acceleration; F_d_prev: the last reference
+# force (N); ff_pipe[:n_ff]: feed-forward commands (V) oldest first, u_ff the last one;
+# v_hist: the linearised commands the predictors run over (scratch)
+ESO_SMC_PLUS_STATE = RecordType(
+    "EsoSmcPlusState",
+    [
+        ("z1", "f", 0.0), ("z2", "f", 0.0), ("z3", "f", 0.0), ("z4", "f", 0.0),
+        ("s", "f", 0.0), ("u_raw", "f", 0.0), ("integral", "f", 0.0), ("th_r", "f", 0.0),
+        ("w_r_prev", "f", 0.0), ("v_in", "f", 0.0), ("F_p", "f"), ("a_in", "f", 0.0),
+        ("F_d_prev", "f"), ("u_ff", "f", 0.0),
+        ("ff_pipe", ("f", MAX_HISTORY)), ("v_hist", ("f", MAX_HISTORY)),
+    ],
+)  # fmt: skip
 
 
-class EsoSmcPlus:
-    name = "eso_smc_plus"
+# ------------------------------------------------------------------ valve map, model pieces
+@kernel
+def linearised(c, table, u):
+    """The linearised command of the valve deviation u (identity without the valve map)."""
+    return u if c.lin_id else to_linear(c, table, u)
 
-    def __init__(self, params: AxisControllerParams, axis: str):
-        p = params.eso_smc_plus
-        T = params.sample_time_s
-        self.T = T
-        self.T2h = 0.5 * T * T
-        self.T3s = T * T * T / 6.0
-        lam = p.lambda_r
-        self.c1 = 2.0 * lam
-        self.c2 = lam * lam
-        self.b0 = p.b_0
-        self.eps = p.epsilon
-        self.delta = p.delta
-        self.k = p.k
-        self.uses_td = p.reference_derivatives == "td"
-        self.angle = axis == "rotary" and p.rotary_observer == "angle"
-        self.uses_theta = self.angle  # reads StepInput.theta (rpm·s)
-        # rotary_model "angle" with a TD-using algorithm: the controller passes (θ, θ_r, ω_r, ω̇_r)
-        self.angle_inputs = axis == "rotary" and params.rotary_model == "angle" and self.uses_td
-        if self.angle:
-            self.l4s = chain_gains(4, p.omega_0, T)
-        else:
-            self.l1, self.l2, self.l3 = eso_gains(p.omega_0, T)
-        self.valve = (
-            ValveCurve(p.valve_du_table, p.valve_flow_table, p.valve_unit_v)
-            if p.valve_linearisation
-            else IDENTITY
-        )
-        self.lin_id = not p.valve_linearisation
-        self.to_lin = None if self.lin_id else self.valve.to_linear  # for the predictors
-        # linear_model "force": the cascade on the measured chamber pressures (module docstring)
-        self.force = axis == "linear" and p.linear_model == "force"
-        self.uses_pressures = self.force
-        self.A_c1, self.A_c2 = p.A_c1, p.A_c2
-        self.F_0 = (p.A_c1 - p.A_c2) * p.p_a  # ambient pressure on the rod (errata Eq. 1), N
-        self.M_k = 1e-3 * p.M  # N per mm/s²
-        self.inv_M_k = 1.0 / self.M_k
-        self.A_f, self.c_v_k = p.A_f, 1e-3 * p.c_v  # N, N per mm/s
-        self.inv_vs = 1.0 / p.v_s
-        self.k_F = p.force_bandwidth
-        self.inv_bF = 1.0 / p.b_F
-        # chamber stiffness (Eq. 3/4 volume terms): Ḟ_p ∋ −n (A1² p1/V1 + A2² p2/V2) ẋ
-        self.nA1s, self.nA2s = p.n_poly * p.A_c1**2, p.n_poly * p.A_c2**2
-        self.V1_0 = p.V_1d + p.A_c1 * 0.5 * p.L  # m³ at x = 0
-        self.V2_0 = p.V_2d + p.A_c2 * 0.5 * p.L
-        self.F_p = _NAN  # measured pressure force, N
-        self.a_in = 0.0  # (F_p − F_f(ẋ̂))/M over the last period, mm/s²
-        self.F_d_prev = _NAN
-        self.ffw = axis == "linear" and p.linear_model == "position" and p.friction_feedforward
-        self.b_F = p.b_F
-        self.ff_pipe = [0.0] * (params.transport_delay_samples + 1)
-        self.u_ff = 0.0  # friction feed-forward of the last update, V
-        lim = params.limits
-        self.u_n = lim.u_neutral
-        self.lo = lim.u_min - lim.u_neutral  # valve deviation limits, V
-        self.hi = lim.u_max - lim.u_neutral
-        self.v_lo = self.valve.to_linear(self.lo)  # the same limits in the linearised command
-        self.v_hi = self.valve.to_linear(self.hi)
-        self.dc = p.delay_compensation and params.transport_delay_samples > 0
-        self.tau = params.transport_delay_samples * T
-        # states: linear (z1, z2, z3) = (x, ẋ, f); rotary angle (z1..z4) = (θ, ω, ω̇, f)
-        self.z1 = self.z2 = self.z3 = self.z4 = 0.0
-        self.integral = 0.0  # linear / speed observer: ∫e dt
-        self.th_r = 0.0  # rotary angle observer: reference angle θ_r (rpm·s)
-        self.w_r_prev = 0.0
-        self.s = 0.0
-        self.u_raw = 0.0
-        self.v_in = 0.0  # linearised command on the valve last period
 
-    # -- what the next algorithm starts from --------------------------------
-    @property
-    def hint(self) -> tuple[float, float, float]:
-        if self.force:  # ẍ = z3 + a_in
-            return self.z1, self.z2, self.z3 + self.a_in
-        if not self.angle:
-            return self.z1, self.z2, self.z3 + self.b0 * self.v_in
-        if self.angle_inputs:  # angle domain: (θ, ω, ω̇)
-            return self.z1, self.z2, self.z3
-        return self.z2, self.z3, self.z4 + self.b0 * self.v_in  # speed domain: (ω, ω̇, ω̈)
+@kernel
+def plus_out(c, s, table, v):
+    """The valve deviation for the linearised command v, saturated (u_raw: unsaturated)."""
+    u = v if c.lin_id else to_valve(c, table, v)
+    s.u_raw = u
+    hi = c.hi
+    lo = c.lo
+    return hi if u > hi else (lo if u < lo else u)
 
-    def _out(self, v: float) -> float:
-        self.u_raw = u = v if self.lin_id else self.valve.to_valve(v)
-        return self.hi if u > self.hi else (self.lo if u < self.lo else u)
 
-    # -- first sample -------------------------------------------------------
-    def start(self, inp: StepInput, u_prev, hint):
-        y, r, r_dot, r_ddot = inp.y, inp.r, inp.r_dot, inp.r_ddot
-        v_in = self.valve.to_linear(inp.u_applied)
-        self.v_in = v_in
-        b0 = self.b0
-        h0 = hint[0] if math.isfinite(hint[0]) else _NAN
-        h1 = hint[1] if math.isfinite(hint[1]) else 0.0
-        h2 = hint[2] if math.isfinite(hint[2]) else 0.0
-        if self.force:
-            self.z1 = z1 = h0 if math.isfinite(h0) else y
-            self.z2 = z2 = h1
-            F_p = self._pressure_force(inp)
-            self.F_p = F_p = F_p if math.isfinite(F_p) else 0.0
-            self.a_in = (F_p - self._friction(z2)) * self.inv_M_k
-            self.z3 = h2 - self.a_in  # cold start: at rest (ẍ = 0), the offsets go into f
-            e, ed = r - z1, r_dot - z2
-            self.integral = 0.0 if u_prev is None else -(ed + self.c1 * e) / self.c2
-            self.F_d_prev = _NAN
-            return self._out(self._law_force(inp, F_p, False))
-        if not self.angle:
-            self.z1 = z1 = h0 if math.isfinite(h0) else y
-            self.z2 = z2 = h1
-            self.z3 = 0.0 if u_prev is None else h2 - b0 * v_in
-            e, ed = r - z1, r_dot - z2
-            self.integral = 0.0 if u_prev is None else -(ed + self.c1 * e) / self.c2
-            s = ed + self.c1 * e + self.c2 * self.integral
-            self.s = s
-            v = (
-                self.eps * sat(s, self.delta, self.k)
-                + r_ddot
-                + self.c1 * ed
-                + self.c2 * e
-                - self.z3
-            ) / b0
-            return self._out(v)
-        w_r, wd_r, wdd_r = self._speed_ref(r, r_dot, r_ddot)
-        self.z1 = th = inp.theta
-        if self.angle_inputs:  # hint in the angle domain: (θ, ω, ω̇)
-            self.z2 = h1 if math.isfinite(hint[1]) else 0.0
-            self.z3 = h2
-            self.z4 = 0.0
-        else:  # speed domain: (ω, ω̇, ω̈)
-            self.z2 = h0 if math.isfinite(h0) else y
-            self.z3 = h1
-            self.z4 = 0.0 if u_prev is None else h2 - b0 * v_in
-        ed, edd = w_r - self.z2, wd_r - self.z3
-        # cold start: θ_r from the measured angle; switch: start on the surface (s = 0)
-        e = 0.0 if u_prev is None else -(edd + self.c1 * ed) / self.c2
-        self.th_r = th + e
-        self.w_r_prev = w_r
-        s = edd + self.c1 * ed + self.c2 * e
-        self.s = s
-        v = (
-            self.eps * sat(s, self.delta, self.k) + wdd_r + self.c1 * edd + self.c2 * ed - self.z4
-        ) / b0
-        return self._out(v)
+@kernel
+def model_history(c, s, table, inp):
+    """(history, u_n) for the predictors: the commands themselves, or linearised in v_hist."""
+    if c.lin_id:
+        return inp.history, c.u_n
+    h = inp.history
+    v = s.v_hist
+    u_n = c.u_n
+    for i in range(1, inp.n_hist):
+        v[i] = to_linear(c, table, h[i] - u_n)
+    return v, 0.0  # v − 0.0 is v, bit for bit
 
-    def _speed_ref(self, r, r_dot, r_ddot):
-        """(ω_r, ω̇_r, ω̈_r) from the controller's inputs (see angle_inputs)."""
-        if self.angle_inputs:
-            return r_dot, r_ddot, 0.0
-        return r, r_dot, r_ddot
 
-    # -- every later sample -------------------------------------------------
-    def update(self, inp: StepInput):
-        u_applied = inp.u_applied
-        v_in = u_applied if self.lin_id else self.valve.to_linear(u_applied)
-        self.v_in = v_in
-        if self.angle:
-            return self._update_angle(inp, v_in)
-        if self.force:
-            return self._update_force(inp)
-        T = self.T
-        if self.ffw:  # the ESO models the law's part only; the FF acts on the force
-            ffp = self.ff_pipe
-            v_in -= ffp[0]
-            del ffp[0]
-        # 3-state ESO (Eq. 18, exact ZOH current observer, pneu_control.observers.eso)
-        z3 = self.z3
-        z1, z2, z3 = eso3_step(
-            self.z1, self.z2, z3, z3 + self.b0 * v_in, inp.y, T, self.T2h,
-            self.l1, self.l2, self.l3,
-        )  # fmt: skip
-        self.z1, self.z2, self.z3 = z1, z2, z3
-        r, r_dot, r_ddot = inp.r, inp.r_dot, inp.r_ddot
-        if self.dc:
-            z1, z2 = predict3(
-                z1, z2, z3, inp.history, self.u_n, self.b0, 0.0, T, self.T2h, self.to_lin
-            )
-            r, r_dot = extrapolate(r, r_dot, r_ddot, self.tau)
+@kernel
+def pressure_force(c, p_c1, p_c2):
+    """F_p = A_c1 p_c1 − A_c2 p_c2 − A_r p_a (errata Eq. 1), N."""
+    return c.A_c1 * p_c1 - c.A_c2 * p_c2 - c.F_0
+
+
+@kernel
+def friction(c, v):
+    """F_f(v) of Eq. 2, Coulomb sign smoothed (tanh over v_s), N; v in mm/s."""
+    return c.A_f * math.tanh(v * c.inv_vs) + c.c_v_k * v
+
+
+@kernel
+def speed_ref(c, r, r_dot, r_ddot):
+    """(ω_r, ω̇_r, ω̈_r) from the controller's inputs (see angle_inputs)."""
+    if c.angle_inputs:
+        return r_dot, r_ddot, 0.0
+    return r, r_dot, r_ddot
+
+
+@kernel
+def plus_hint(c, s):
+    if c.force:  # ẍ = z3 + a_in
+        return s.z1, s.z2, s.z3 + s.a_in
+    if not c.angle:
+        return s.z1, s.z2, s.z3 + c.b0 * s.v_in
+    if c.angle_inputs:  # angle domain: (θ, ω, ω̇)
+        return s.z1, s.z2, s.z3
+    return s.z2, s.z3, s.z4 + c.b0 * s.v_in  # speed domain: (ω, ω̇, ω̈)
+
+
+# ------------------------------------------------------------------ force cascade
+@kernel
+def law_force(c, s, inp, F_p, integrate):
+    """The cascade's linearised command: outer Eq. 26–30 on ẍ, inner force loop (Eq. 1–4)."""
+    T = c.T
+    z1 = s.z1
+    z2 = s.z2
+    z3 = s.z3
+    r = inp.r
+    r_dot = inp.r_dot
+    r_ddot = inp.r_ddot
+    # outer loop: Eq. 26–30 on ẍ, asking for an acceleration a_d
+    e = r - z1
+    ed = r_dot - z2
+    integral = s.integral + T * e
+    c1 = c.c1
+    c2 = c.c2
+    sv = ed + c1 * e + c2 * integral
+    s.s = sv
+    a_d = c.eps * sat(sv, c.delta, c.k) + r_ddot + c1 * ed + c2 * e - z3
+    # desired piston force (Eq. 1 with the Eq. 2 friction of the reference speed)
+    F_r = c.M_k * r_ddot + friction(c, r_dot)  # the reference's own force
+    F_d = F_r + c.M_k * (a_d - r_ddot)
+    # feed-forward of Ḟ_d: the reference part only (the feedback part carries laser noise)
+    F_rp = s.F_d_prev
+    s.F_d_prev = F_r
+    F_d_dot = 0.0 if F_rp != F_rp else (F_r - F_rp) / T
+    # inner loop: Ḟ_p = b_F u − n (A1² p1/V1 + A2² p2/V2) ẋ  (Eq. 3/4, volume terms)
+    x_m = 1e-3 * z1
+    K_s = c.nA1s * inp.p_c1 / (c.V1_0 + c.A_c1 * x_m) + c.nA2s * inp.p_c2 / (c.V2_0 - c.A_c2 * x_m)
+    if not (-1e300 < K_s < 1e300):  # a NaN pressure this sample: no stiffness term
+        K_s = 0.0
+    v = (F_d_dot + c.k_F * (F_d - F_p) + K_s * 1e-3 * z2) * c.inv_bF
+    if integrate:  # conditional integration (as ESO-SMC)
+        s.integral = conditional_integral(s.integral, integral, e, v, sv, c.v_lo, c.v_hi, c.delta)
+    return v
+
+
+@kernel
+def update_force(c, s, table, inp):
+    T = c.T
+    # 3-state ESO on the laser with the measured acceleration as known input:
+    # ẍ = f + (F_p − F_f(ẋ))/M  (f: sensor offsets, static friction, model error)
+    z3 = s.z3
+    z1, z2, z3 = eso3_step(s.z1, s.z2, z3, z3 + s.a_in, inp.y, T, c.T2h, c.l1, c.l2, c.l3)
+    s.z1 = z1
+    s.z2 = z2
+    s.z3 = z3
+    F_p = pressure_force(c, inp.p_c1, inp.p_c2)
+    if not (-1e300 < F_p < 1e300):  # no pressures this sample: hold the last one
+        F_p = s.F_p
+    s.F_p = F_p
+    s.a_in = (F_p - friction(c, z2)) * c.inv_M_k
+    return plus_out(c, s, table, law_force(c, s, inp, F_p, True))
+
+
+# ------------------------------------------------------------------ angle observer
+@kernel
+def update_angle(c, s, table, inp, v_in):
+    T = c.T
+    T2h = c.T2h
+    T3s = c.T3s
+    b0 = c.b0
+    # 4-state ESO on the angle (θ‴ = f + b0 u; observers.eso_chain, exact ZOH current observer)
+    z4 = s.z4
+    z1, z2, z3, z4 = eso4_step(
+        s.z1, s.z2, s.z3, z4, z4 + b0 * v_in, inp.theta, T, T2h, T3s, c.l1, c.l2, c.l3, c.l4
+    )
+    s.z1 = z1
+    s.z2 = z2
+    s.z3 = z3
+    s.z4 = z4
+    w_r, wd_r, wdd_r = speed_ref(c, inp.r, inp.r_dot, inp.r_ddot)
+    # reference angle θ_r = ∫ω_r dt (trapezoid); the controller's own in angle_inputs
+    angle_inputs = c.angle_inputs
+    if angle_inputs:
+        th_r = inp.r
+    else:
+        th_r = s.th_r + 0.5 * T * (s.w_r_prev + w_r)
+        s.w_r_prev = w_r
+    th_c = th_r
+    w_c = w_r
+    wd_c = wd_r
+    if c.dc:  # act on the state the command will meet: t + d T
+        hist, u_n = model_history(c, s, table, inp)
+        z1, z2, z3 = predict4(z1, z2, z3, z4, hist, inp.n_hist, u_n, b0, T, T2h, T3s)
+        tau = c.tau
+        th_c += tau * w_r + 0.5 * tau * tau * wd_r
+        w_c += tau * wd_r
+    e = th_c - z1
+    ed = w_c - z2
+    edd = wd_c - z3
+    c1 = c.c1
+    c2 = c.c2
+    sv = edd + c1 * ed + c2 * e  # = ė_ω + 2λ e_ω + λ² ∫e_ω (Eq. 26 fixed)
+    s.s = sv
+    v = (c.eps * sat(sv, c.delta, c.k) + wdd_r + c1 * edd + c2 * ed - z4) / b0
+    if not angle_inputs:
+        # anti-windup: the angle error is frozen while the valve saturates in e's direction
+        if (e > 0.0 and v > c.v_hi) or (e < 0.0 and v < c.v_lo):
+            th_r = s.th_r + T * s.z2
+        s.th_r = th_r
+    return plus_out(c, s, table, v)
+
+
+# ------------------------------------------------------------------ start, update
+@kernel
+def plus_start(c, s, table, inp, u_prev, h0, h1, h2):
+    y = inp.y
+    r = inp.r
+    r_dot = inp.r_dot
+    r_ddot = inp.r_ddot
+    v_in = linearised(c, table, inp.u_applied)
+    s.v_in = v_in
+    b0 = c.b0
+    c1 = c.c1
+    c2 = c.c2
+    h0 = h0 if math.isfinite(h0) else NAN
+    h1 = h1 if math.isfinite(h1) else 0.0
+    h2 = h2 if math.isfinite(h2) else 0.0
+    cold = u_prev != u_prev
+    if c.force:
+        z1 = h0 if math.isfinite(h0) else y
+        z2 = h1
+        s.z1 = z1
+        s.z2 = z2
+        F_p = pressure_force(c, inp.p_c1, inp.p_c2)
+        F_p = F_p if math.isfinite(F_p) else 0.0
+        s.F_p = F_p
+        a_in = (F_p - friction(c, z2)) * c.inv_M_k
+        s.a_in = a_in
+        s.z3 = h2 - a_in  # cold start: at rest (ẍ = 0), the offsets go into f
         e = r - z1
         ed = r_dot - z2
-        integral = self.integral + T * e
-        c1, c2 = self.c1, self.c2
-        s = ed + c1 * e + c2 * integral  # Eq. 26 (fixed)
-        self.s = s
-        v = (
-            self.eps * sat(s, self.delta, self.k) + r_ddot + c1 * ed + c2 * e - z3
-        ) / self.b0  # Eq. 30
-        if self.ffw:
-            # friction feed-forward through the pressure rate: u_ff = dF_f(ṙ)/dt / b_F (Eq. 2)
-            F_r = self._friction(r_dot)
-            u_ff = 0.0 if self.F_d_prev != self.F_d_prev else (F_r - self.F_d_prev) / (T * self.b_F)
-            self.F_d_prev = F_r
-            self.ff_pipe.append(u_ff)
-            self.u_ff = u_ff
-            v += u_ff
-        # conditional integration (as ESO-SMC): valve saturation or |s| > Δ
-        self.integral = conditional_integral(
-            self.integral, integral, e, v, s, self.v_lo, self.v_hi, self.delta
-        )
-        return self._out(v)
+        s.integral = 0.0 if cold else -(ed + c1 * e) / c2
+        s.F_d_prev = NAN
+        return plus_out(c, s, table, law_force(c, s, inp, F_p, False))
+    if not c.angle:
+        z1 = h0 if math.isfinite(h0) else y
+        z2 = h1
+        s.z1 = z1
+        s.z2 = z2
+        z3 = 0.0 if cold else h2 - b0 * v_in
+        s.z3 = z3
+        e = r - z1
+        ed = r_dot - z2
+        integral = 0.0 if cold else -(ed + c1 * e) / c2
+        s.integral = integral
+        sv = ed + c1 * e + c2 * integral
+        s.s = sv
+        v = (c.eps * sat(sv, c.delta, c.k) + r_ddot + c1 * ed + c2 * e - z3) / b0
+        return plus_out(c, s, table, v)
+    w_r, wd_r, wdd_r = speed_ref(c, r, r_dot, r_ddot)
+    th = inp.theta
+    s.z1 = th
+    if c.angle_inputs:  # hint in the angle domain: (θ, ω, ω̇)
+        z2 = h1
+        z3 = h2
+        z4 = 0.0
+    else:  # speed domain: (ω, ω̇, ω̈)
+        z2 = h0 if math.isfinite(h0) else y
+        z3 = h1
+        z4 = 0.0 if cold else h2 - b0 * v_in
+    s.z2 = z2
+    s.z3 = z3
+    s.z4 = z4
+    ed = w_r - z2
+    edd = wd_r - z3
+    # cold start: θ_r from the measured angle; switch: start on the surface (s = 0)
+    e = 0.0 if cold else -(edd + c1 * ed) / c2
+    s.th_r = th + e
+    s.w_r_prev = w_r
+    sv = edd + c1 * ed + c2 * e
+    s.s = sv
+    v = (c.eps * sat(sv, c.delta, c.k) + wdd_r + c1 * edd + c2 * ed - z4) / b0
+    return plus_out(c, s, table, v)
 
-    def _pressure_force(self, inp: StepInput) -> float:
+
+@kernel
+def plus_update(c, s, table, inp):
+    v_in = linearised(c, table, inp.u_applied)
+    s.v_in = v_in
+    if c.angle:
+        return update_angle(c, s, table, inp, v_in)
+    if c.force:
+        return update_force(c, s, table, inp)
+    T = c.T
+    b0 = c.b0
+    ffw = c.ffw
+    if ffw:  # the ESO models the law's part only; the FF acts on the force
+        ffp = s.ff_pipe
+        v_in -= ffp[0]
+        for i in range(c.n_ff - 1):
+            ffp[i] = ffp[i + 1]
+    # 3-state ESO (Eq. 18, exact ZOH current observer, pneu_control.observers.eso)
+    z3 = s.z3
+    z1, z2, z3 = eso3_step(s.z1, s.z2, z3, z3 + b0 * v_in, inp.y, T, c.T2h, c.l1, c.l2, c.l3)
+    s.z1 = z1
+    s.z2 = z2
+    s.z3 = z3
+    r = inp.r
+    r_dot = inp.r_dot
+    r_ddot = inp.r_ddot
+    if c.dc:
+        hist, u_n = model_history(c, s, table, inp)
+        z1, z2 = predict3(z1, z2, z3, hist, inp.n_hist, u_n, b0, 0.0, T, c.T2h)
+        r, r_dot = extrapolate(r, r_dot, r_ddot, c.tau)
+    e = r - z1
+    ed = r_dot - z2
+    integral = s.integral + T * e
+    c1 = c.c1
+    c2 = c.c2
+    sv = ed + c1 * e + c2 * integral  # Eq. 26 (fixed)
+    s.s = sv
+    v = (c.eps * sat(sv, c.delta, c.k) + r_ddot + c1 * ed + c2 * e - z3) / b0  # Eq. 30
+    if ffw:
+        # friction feed-forward through the pressure rate: u_ff = dF_f(ṙ)/dt / b_F (Eq. 2)
+        F_r = friction(c, r_dot)
+        F_dp = s.F_d_prev
+        u_ff = 0.0 if F_dp != F_dp else (F_r - F_dp) / (T * c.b_F)
+        s.F_d_prev = F_r
+        s.ff_pipe[c.n_ff - 1] = u_ff
+        s.u_ff = u_ff
+        v += u_ff
+    # conditional integration (as ESO-SMC): valve saturation or |s| > Δ
+    s.integral = conditional_integral(s.integral, integral, e, v, sv, c.v_lo, c.v_hi, c.delta)
+    return plus_out(c, s, table, v)
+
+
+class EsoSmcPlus(KernelAlgorithm):
+    name = "eso_smc_plus"
+    CONSTANTS = ESO_SMC_PLUS_CONSTANTS
+    STATE = ESO_SMC_PLUS_STATE
+    KERNEL = AlgorithmKernel(plus_start, plus_update, plus_hint)
+
+    def __init__(self, params: AxisControllerParams, axis: str):
+        super().__init__(params, axis)
+        c = self.c
+        self.uses_td = params.eso_smc_plus.reference_derivatives == "td"
+        self.uses_theta = bool(c.angle)  # reads StepInput.theta (rpm·s)
+        self.uses_pressures = bool(c.force)
+        # the valve map of the linearised command (None without it)
+        self.valve = None if c.lin_id else ValveCurve(*self._chart(params))
+
+    @staticmethod
+    def _chart(params: AxisControllerParams) -> tuple[Any, Any, float]:
+        p = params.eso_smc_plus
+        return p.valve_du_table, p.valve_flow_table, p.valve_unit_v
+
+    def table(self, params: AxisControllerParams, axis: str) -> Any:
+        """The valve chart, rows (du, flow) as lists (the compiled loop: ``np.asarray``)."""
+        du, fl, _ = self._chart(params)
+        return valve_table(du, fl)
+
+    def constants(self, params: AxisControllerParams, axis: str):
+        p = params.eso_smc_plus
+        T = params.sample_time_s
+        lam = p.lambda_r
+        uses_td = p.reference_derivatives == "td"
+        angle = axis == "rotary" and p.rotary_observer == "angle"
+        if angle:
+            l1, l2, l3, l4 = chain_gains(4, p.omega_0, T)
+        else:
+            l1, l2, l3 = eso_gains(p.omega_0, T)
+            l4 = NAN
+        lin_id = not p.valve_linearisation
+        lim = params.limits
+        lo = lim.u_min - lim.u_neutral  # valve deviation limits, V
+        hi = lim.u_max - lim.u_neutral
+        c = ESO_SMC_PLUS_CONSTANTS.new(
+            T=T,
+            T2h=0.5 * T * T,
+            T3s=T * T * T / 6.0,
+            c1=2.0 * lam,
+            c2=lam * lam,
+            b0=p.b_0,
+            eps=p.epsilon,
+            delta=p.delta,
+            k=p.k,
+            l1=l1,
+            l2=l2,
+            l3=l3,
+            l4=l4,
+            A_c1=p.A_c1,
+            A_c2=p.A_c2,
+            F_0=(p.A_c1 - p.A_c2) * p.p_a,  # ambient pressure on the rod (errata Eq. 1), N
+            M_k=1e-3 * p.M,  # N per mm/s²
+            inv_M_k=1.0 / (1e-3 * p.M),
+            A_f=p.A_f,  # N
+            c_v_k=1e-3 * p.c_v,  # N per mm/s
+            inv_vs=1.0 / p.v_s,
+            k_F=p.force_bandwidth,
+            inv_bF=1.0 / p.b_F,
+            # chamber stiffness (Eq. 3/4 volume terms): Ḟ_p ∋ −n (A1² p1/V1 + A2² p2/V2) ẋ
+            nA1s=p.n_poly * p.A_c1**2,
+            nA2s=p.n_poly * p.A_c2**2,
+            V1_0=p.V_1d + p.A_c1 * 0.5 * p.L,  # m³ at x = 0
+            V2_0=p.V_2d + p.A_c2 * 0.5 * p.L,
+            b_F=p.b_F,
+            u_n=lim.u_neutral,
+            lo=lo,
+            hi=hi,
+            tau=params.transport_delay_samples * T,
+            angle=int(angle),
+            # rotary_model "angle" with a TD-using algorithm: the controller passes
+            # (θ, θ_r, ω_r, ω̇_r)
+            angle_inputs=int(axis == "rotary" and params.rotary_model == "angle" and uses_td),
+            lin_id=int(lin_id),
+            force=int(axis == "linear" and p.linear_model == "force"),
+            ffw=int(axis == "linear" and p.linear_model == "position" and p.friction_feedforward),
+            dc=int(p.delay_compensation and params.transport_delay_samples > 0),
+            n_ff=params.transport_delay_samples + 1,
+            **valve_constants(*self._chart(params)),  # used with the valve map only
+        )
+        # the same limits in the linearised command
+        tab = self.table(params, axis)
+        c.v_lo = linearised(c, tab, lo)
+        c.v_hi = linearised(c, tab, hi)
+        return c
+
+    # thin views of the kernels (tests, analysis)
+    def _pressure_force(self, inp: Any) -> float:
         """F_p = A_c1 p_c1 − A_c2 p_c2 − A_r p_a (errata Eq. 1), N."""
-        return self.A_c1 * inp.p_c1 - self.A_c2 * inp.p_c2 - self.F_0
+        return pressure_force(self.c, inp.p_c1, inp.p_c2)
 
     def _friction(self, v: float) -> float:
         """F_f(v) of Eq. 2, Coulomb sign smoothed (tanh over v_s), N; v in mm/s."""
-        return self.A_f * math.tanh(v * self.inv_vs) + self.c_v_k * v
-
-    def _update_force(self, inp: StepInput):
-        T = self.T
-        # 3-state ESO on the laser with the measured acceleration as known input:
-        # ẍ = f + (F_p − F_f(ẋ))/M  (f: sensor offsets, static friction, model error)
-        z3 = self.z3
-        z1, z2, z3 = eso3_step(
-            self.z1, self.z2, z3, z3 + self.a_in, inp.y, T, self.T2h, self.l1, self.l2, self.l3
-        )
-        self.z1, self.z2, self.z3 = z1, z2, z3
-        F_p = self._pressure_force(inp)
-        if not (-1e300 < F_p < 1e300):  # no pressures this sample: hold the last one
-            F_p = self.F_p
-        self.F_p = F_p
-        self.a_in = (F_p - self._friction(z2)) * self.inv_M_k
-        return self._out(self._law_force(inp, F_p, True))
-
-    def _law_force(self, inp: StepInput, F_p, integrate):
-        T, z1, z2, z3 = self.T, self.z1, self.z2, self.z3
-        r, r_dot, r_ddot = inp.r, inp.r_dot, inp.r_ddot
-        # outer loop: Eq. 26–30 on ẍ, asking for an acceleration a_d
-        e = r - z1
-        ed = r_dot - z2
-        integral = self.integral + T * e
-        c1, c2 = self.c1, self.c2
-        s = ed + c1 * e + c2 * integral
-        self.s = s
-        a_d = self.eps * sat(s, self.delta, self.k) + r_ddot + c1 * ed + c2 * e - z3
-        # desired piston force (Eq. 1 with the Eq. 2 friction of the reference speed)
-        F_r = self.M_k * r_ddot + self._friction(r_dot)  # the reference's own force
-        F_d = F_r + self.M_k * (a_d - r_ddot)
-        # feed-forward of Ḟ_d: the reference part only (the feedback part carries laser noise)
-        F_rp = self.F_d_prev
-        self.F_d_prev = F_r
-        F_d_dot = 0.0 if F_rp != F_rp else (F_r - F_rp) / T
-        # inner loop: Ḟ_p = b_F u − n (A1² p1/V1 + A2² p2/V2) ẋ  (Eq. 3/4, volume terms)
-        x_m = 1e-3 * z1
-        K_s = self.nA1s * inp.p_c1 / (self.V1_0 + self.A_c1 * x_m) + self.nA2s * inp.p_c2 / (
-            self.V2_0 - self.A_c2 * x_m
-        )
-        if not (-1e300 < K_s < 1e300):  # a NaN pressure this sample: no stiffness term
-            K_s = 0.0
-        v = (F_d_dot + self.k_F * (F_d - F_p) + K_s * 1e-3 * z2) * self.inv_bF
-        if integrate:  # conditional integration (as ESO-SMC)
-            self.integral = conditional_integral(
-                self.integral, integral, e, v, s, self.v_lo, self.v_hi, self.delta
-            )
-        return v
-
-    def _update_angle(self, inp: StepInput, v_in):
-        T, T2h, T3s = self.T, self.T2h, self.T3s
-        # 4-state ESO on the angle (θ‴ = f + b0 u; observers.eso_chain, exact ZOH current observer)
-        z4 = self.z4
-        z1, z2, z3, z4 = eso4_step(
-            self.z1, self.z2, self.z3, z4, z4 + self.b0 * v_in, inp.theta, T, T2h, T3s, self.l4s
-        )
-        self.z1, self.z2, self.z3, self.z4 = z1, z2, z3, z4
-        w_r, wd_r, wdd_r = self._speed_ref(inp.r, inp.r_dot, inp.r_ddot)
-        # reference angle θ_r = ∫ω_r dt (trapezoid); the controller's own in angle_inputs
-        if self.angle_inputs:
-            th_r = inp.r
-        else:
-            th_r = self.th_r + 0.5 * T * (self.w_r_prev + w_r)
-            self.w_r_prev = w_r
-        th_c, w_c, wd_c = th_r, w_r, wd_r
-        if self.dc:  # act on the state the command will meet: t + d T
-            z1, z2, z3 = predict4(
-                z1, z2, z3, z4, inp.history, self.u_n, self.b0, T, T2h, T3s, self.to_lin
-            )
-            tau = self.tau
-            th_c += tau * w_r + 0.5 * tau * tau * wd_r
-            w_c += tau * wd_r
-        e = th_c - z1
-        ed = w_c - z2
-        edd = wd_c - z3
-        c1, c2 = self.c1, self.c2
-        s = edd + c1 * ed + c2 * e  # = ė_ω + 2λ e_ω + λ² ∫e_ω (Eq. 26 fixed)
-        self.s = s
-        v = (self.eps * sat(s, self.delta, self.k) + wdd_r + c1 * edd + c2 * ed - z4) / self.b0
-        if not self.angle_inputs:
-            # anti-windup: the angle error is frozen while the valve saturates in e's direction
-            if (e > 0.0 and v > self.v_hi) or (e < 0.0 and v < self.v_lo):
-                th_r = self.th_r + T * self.z2
-            self.th_r = th_r
-        return self._out(v)
+        return friction(self.c, v)

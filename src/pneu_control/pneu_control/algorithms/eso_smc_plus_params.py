@@ -5,8 +5,8 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 
+from pneu_msgs_py.contract.valve_chart import MPYE_DU_V, MPYE_FLOW
 from pneu_msgs_py.params.core import ParamError, param
-from pneu_sim.physics.params import MPYE_DU_V, MPYE_FLOW
 
 from pneu_control.algorithms.smc import (
     NONNEGATIVE,
@@ -65,13 +65,13 @@ class EsoSmcPlusParams:
         MPYE_DU_V,
         unit="V",
         desc="|u − 5 V| breakpoints of the valve flow curve",
-        source="Festo MPYE flow-vs-setpoint chart, digitised (the twin's, pneu_sim.physics.params)",
+        source="Festo MPYE flow-vs-setpoint chart, digitised (pneu_msgs_py.contract.valve_chart)",
     )
     valve_flow_table: tuple[float, ...] = param(
         MPYE_FLOW,
         unit="-",
         desc="normalised flow at valve_du_table",
-        source="Festo MPYE flow-vs-setpoint chart, digitised (the twin's, pneu_sim.physics.params)",
+        source="Festo MPYE flow-vs-setpoint chart, digitised (pneu_msgs_py.contract.valve_chart)",
     )
     valve_unit_v: float = param(
         1.0,

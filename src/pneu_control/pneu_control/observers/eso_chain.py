@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from pneu_msgs_py.params.records import kernel
 
 __all__ = ["chain_gains", "chain_matrices", "eso4_step", "predict4", "ChainEso"]
 
@@ -69,48 +70,31 @@ def chain_gains(n: int, omega_0: float, T: float) -> tuple[float, ...]:
     return tuple(float(g) for g in gains)
 
 
-def eso4_step(
-    z1: float,
-    z2: float,
-    z3: float,
-    z4: float,
-    jerk: float,
-    y: float,
-    T: float,
-    T2h: float,
-    T3s: float,
-    gains: tuple[float, float, float, float],
-) -> tuple[float, float, float, float]:
+@kernel
+def eso4_step(z1, z2, z3, z4, jerk, y, T, T2h, T3s, l1, l2, l3, l4):
     """One step of the 4-state current observer (fast path of :class:`ChainEso`, n = 4).
 
     ``jerk`` = z4 + b0 u (the modelled third derivative over the last
-    period); ``T2h`` = T²/2, ``T3s`` = T³/6. Returns (z1, z2, z3, z4).
+    period); ``T2h`` = T²/2, ``T3s`` = T³/6; ``l1..l4`` the gains of
+    :func:`chain_gains` (n = 4). Returns (z1, z2, z3, z4).
     """
     z1p = z1 + T * z2 + T2h * z3 + T3s * jerk
     z2p = z2 + T * z3 + T2h * jerk
     z3p = z3 + T * jerk
     ey = y - z1p
-    l1, l2, l3, l4 = gains
     return z1p + l1 * ey, z2p + l2 * ey, z3p + l3 * ey, z4 + l4 * ey
 
 
-def predict4(
-    z1: float,
-    z2: float,
-    z3: float,
-    z4: float,
-    history: list[float],
-    u_n: float,
-    b0: float,
-    T: float,
-    T2h: float,
-    T3s: float,
-    to_linear=None,
-) -> tuple[float, float, float]:
-    """(z1, z2, z3) of the 4-state chain run over the transport delay (as :func:`predict3`)."""
-    for i in range(1, len(history)):
+@kernel
+def predict4(z1, z2, z3, z4, history, n_hist, u_n, b0, T, T2h, T3s):
+    """(z1, z2, z3) of the 4-state chain run over the transport delay (as :func:`predict3`).
+
+    ``history[:n_hist]``: commands in V, oldest first; the model jerk over each of
+    ``history[1:n_hist]`` is z4 + b0 (u − u_n).
+    """
+    for i in range(1, n_hist):
         du = history[i] - u_n
-        jerk = z4 + b0 * (du if to_linear is None else to_linear(du))
+        jerk = z4 + b0 * du
         z1 += T * z2 + T2h * z3 + T3s * jerk
         z2 += T * z3 + T2h * jerk
         z3 += T * jerk
@@ -118,7 +102,7 @@ def predict4(
 
 
 class ChainEso:
-    """Slow, obvious n-state ESO (reference for tests and the fast inlined paths).
+    """Slow, obvious n-state ESO (reference for tests and the fast kernels).
 
     ``update(y, u)``: ``u`` is the command deviation that was on the valve during
     the last sample period (V); states ``z`` in the controller's units.

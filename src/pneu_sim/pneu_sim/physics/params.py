@@ -22,6 +22,7 @@ import itertools
 import math
 from dataclasses import dataclass
 
+from pneu_msgs_py.contract.valve_chart import MPYE_DU_V, MPYE_FLOW
 from pneu_msgs_py.params.core import ParamError, param
 
 __all__ = [
@@ -44,17 +45,6 @@ __all__ = [
 ]
 
 P_ATM = 101325.0
-
-# Festo MPYE-5 normalised flow vs |u - 5 V| (digitised from Festo's flow-vs-setpoint
-# chart, reference/plant-parameters.md).
-MPYE_DU_V = (
-    0.0, 0.36, 0.71, 0.94, 1.20, 1.43, 1.66, 1.86, 2.12, 2.47, 2.81, 3.16, 3.47, 3.81,
-    4.20, 4.62, 4.75,
-)  # fmt: skip
-MPYE_FLOW = (
-    0.0, 0.01, 0.03, 0.06, 0.11, 0.18, 0.26, 0.31, 0.40, 0.48, 0.59, 0.67, 0.74, 0.82,
-    0.90, 0.98, 1.00,
-)  # fmt: skip
 
 
 class PlantConfigError(ParamError):
