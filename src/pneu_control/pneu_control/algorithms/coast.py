@@ -34,7 +34,8 @@ the first pulse of a run is the smallest (x = 0: it measures d_min); a pulse wit
     e < −e_over           → the overshoot strategy: ``reapproach`` (wrap += 360°: a
                             full turn more, the only way back one-way), ``fault``
                             (flag, stay vented), ``hold`` (stay vented)
-    e ≤ tol or e < ρ d_min → settled (vented; a smaller pulse does not exist)
+    e ≤ tol, or e < ρ d_min and e ≤ e_over
+                          → settled (vented; a smaller pulse does not exist)
     e ≤ e_pulse            → pulse
     otherwise              → drive
 
@@ -129,11 +130,11 @@ class CoastParams:
         source=TWIN + "J_m +50 % with M_c −25 % coasts 1.5–2 × the nominal distance",
     )
     margin_deg: float = param(
-        3.0,
+        5.0,
         unit="°",
         desc="m_0: and by this angle (left to the pulses)",
         **NONNEGATIVE,
-        source=TWIN + "a few pulse steps",
+        source=TWIN + "a few pulse steps (so that the first pulse, the smallest, cannot overshoot)",
     )
     tolerance_deg: float = param(
         1.0, unit="°", desc="tol: settled once 0 ≤ e ≤ tol (no pulse inside)", **POSITIVE
@@ -186,12 +187,22 @@ class CoastParams:
         **POSITIVE,
         source=TWIN + "twice the slowest breakaway at 5.8 V over the plant band",
     )
+    pulse_lead_s: float = param(
+        0.002,
+        unit="s",
+        desc="after a breakaway at t_b, later pulses vent at t_b − this unless they break away "
+        "sooner (the pressure still rises in the vent lag: the motor breaks away barely)",
+        **NONNEGATIVE,
+        source=TWIN + "with 1.5 × breakaway friction a 5.8 V pulse vented 2 ms before the "
+        "breakaway steps 1.5° against 4.3° vented at it",
+    )
     pulse_step_deg: float = param(
-        1.0,
+        2.0,
         unit="°",
         desc="d_min: first estimate of the smallest pulse step (learnt)",
         **POSITIVE,
-        source=TWIN + "0.8–1.4° at 5.8 V with J_m, M_c, V_m1 over their bands",
+        source=TWIN + "0.8–1.4° at 5.8 V with J_m, M_c, V_m1 over their bands, 2.5–4.3° "
+        "with 1.3–1.5 × breakaway friction: 2° errs neither way by much before the first pulse",
     )
     pulse_x0_s: float = param(
         0.0033,
@@ -248,7 +259,7 @@ class CoastParams:
         hi=5.0,
         source=TWIN + "the same open-loop speeds",
     )
-    omega_0: float = omega_0_field(300.0, "", "observer bandwidth ω0 (Eq. 17) of the angle ESO")
+    omega_0: float = omega_0_field(600.0, "", "observer bandwidth ω0 (Eq. 17) of the angle ESO")
     b_0: float = b_0_field(
         100000.0, "estimated on the twin (°/s² per V)", desc="input gain b0 of the angle ESO"
     )
@@ -260,7 +271,7 @@ COAST_CONSTANTS = RecordType(
         ("T", "f"), ("T2h", "f"), ("b0", "f"), ("l1", "f"), ("l2", "f"), ("l3", "f"),
         ("w_max", "f"), ("w_min", "f"), ("k_e", "f"), ("a_c", "f"), ("t_lead", "f"),
         ("gamma", "f"), ("m_f", "f"), ("m_first", "f"), ("m_0", "f"), ("tol", "f"), ("e_over", "f"),
-        ("rho", "f"), ("e_pulse", "f"), ("du_p0", "f"), ("du_step", "f"), ("n_break", "i"),
+        ("rho", "f"), ("e_pulse", "f"), ("du_p0", "f"), ("du_step", "f"), ("n_break", "i"), ("n_lead", "i"),
         ("d_min0", "f"), ("x0", "f"), ("x_max", "f"), ("a_p", "f"), ("n_still", "i"),
         ("n_vent", "i"), ("kp", "f"), ("ki", "f"), ("i_max", "f"), ("u_ff", "f"),
         ("u_0", "f"), ("lo", "f"), ("hi", "f"), ("overshoot", "i"),
@@ -276,7 +287,7 @@ COAST_STATE = RecordType(
         ("u_in", "f", 0.0), ("integral", "f", 0.0), ("wrap", "f", 0.0), ("kappa", "f", 1.0),
         ("d_min", "f"), ("pulse_du", "f"), ("phase", "i", PHASE_COAST),
         ("coast_from", "i", FROM_NONE), ("coast_w", "f", 0.0), ("coast_th", "f", 0.0),
-        ("x_hold", "f", 0.0), ("k_break", "i", -1), ("k_phase", "i", 0), ("k_still", "i", 0),
+        ("x_hold", "f", 0.0), ("t_on", "f"), ("k_break", "i", -1), ("k_phase", "i", 0), ("k_still", "i", 0),
         ("y_last", "f"), ("fault", "i"), ("n_coasts", "i"), ("n_pulses", "i"),
     ],
 )  # fmt: skip
@@ -308,7 +319,12 @@ def _learn(c, s, y):
         if dist > 0.0:
             g = 1.0 + s.x_hold / c.x0
             s.d_min = s.d_min + c.gamma * (dist / (g * g) - s.d_min)
-        s.n_pulses += 1
+            s.n_pulses += 1
+        elif s.t_on < c.n_break:
+            s.t_on += 1.0  # vented too early to break away: open a sample longer next
+        else:  # no breakaway in n_break samples: open wider next
+            du = s.pulse_du + c.du_step
+            s.pulse_du = c.hi if du > c.hi else du
     s.coast_from = FROM_NONE
 
 
@@ -322,7 +338,8 @@ def _decide(c, s, inp, y):
             e += 360.0
         elif c.overshoot == 1:
             s.fault = 1
-    if s.fault != 0 or e < -c.e_over or e <= c.tol or e < c.rho * s.d_min:
+    small = e < c.rho * s.d_min and e <= c.e_over  # no smaller step, and already in the band
+    if s.fault != 0 or e < -c.e_over or e <= c.tol or small:
         _to(s, PHASE_SETTLED)
     elif e <= c.e_pulse:
         x = c.x0 * (math.sqrt(c.a_p * e / s.d_min) - 1.0)
@@ -381,18 +398,17 @@ def _law(c, s, inp):
     if s.phase == PHASE_DRIVE:
         return _drive(c, s, inp, y)
     if s.phase == PHASE_PULSE:
-        if s.k_break < 0 and y > s.coast_th:
-            s.k_break = 0  # the encoder shows the breakaway
+        if s.k_break < 0 and y > s.coast_th:  # the encoder shows the breakaway
+            s.k_break = 0
+            if s.k_phase <= s.t_on:  # open time to vent at, a little before it, from now on
+                t = s.k_phase - c.n_lead
+                s.t_on = 1.0 if t < 1.0 else float(t)
         elif s.k_break >= 0:
             s.k_break += 1
-        if s.k_break >= 0 and s.k_break >= s.x_hold:
-            s.coast_from = FROM_PULSE
-            _to(s, PHASE_COAST)
-        elif s.k_break < 0 and s.k_phase > c.n_break:  # no breakaway: vent, open wider next
-            s.pulse_du = s.pulse_du + c.du_step
-            if s.pulse_du > c.hi:
-                s.pulse_du = c.hi
-            s.coast_from = FROM_NONE
+        if (s.k_break >= 0 and s.k_break >= s.x_hold) or (
+            s.k_break < 0 and s.k_phase >= s.t_on + s.x_hold  # t_on ≤ n_break
+        ):
+            s.coast_from = FROM_PULSE  # vented: the breakaway may still come in the vent lag
             _to(s, PHASE_COAST)
         else:
             s.u_raw = s.pulse_du
@@ -413,6 +429,8 @@ def coast_start(c, s, table, inp, u_prev, h0, h1, h2):
         s.d_min = c.d_min0
     if s.pulse_du != s.pulse_du:
         s.pulse_du = c.du_p0
+    if s.t_on != s.t_on:
+        s.t_on = float(c.n_break)
     s.y_last = inp.y
     s.k_still = 0
     s.coast_from = FROM_NONE
@@ -472,6 +490,7 @@ class Coast(KernelAlgorithm):
             du_p0=p.pulse_du,
             du_step=p.pulse_du_step,
             n_break=_samples(p.pulse_break_s, T),
+            n_lead=_samples(p.pulse_lead_s, T),
             d_min0=p.pulse_step_deg,
             x0=p.pulse_x0_s / T,
             x_max=float(_samples(p.pulse_hold_max_s, T)),
@@ -489,4 +508,4 @@ class Coast(KernelAlgorithm):
         )
 
     def initial_state(self, c):
-        return COAST_STATE.new(d_min=c.d_min0, pulse_du=c.du_p0, s=NAN)
+        return COAST_STATE.new(d_min=c.d_min0, pulse_du=c.du_p0, t_on=float(c.n_break), s=NAN)
