@@ -218,7 +218,7 @@ def _bits(values) -> list[int]:
 )
 def test_compiled_kernels_equal_python(case):
     """The Python kernels in closed loop with the twin; the compiled ones replay its inputs."""
-    name, coast, target = case
+    _name, coast, target = case
     params = _overshooting(coast["overshoot"]) if "overshoot" in coast else _params(target)
     alg = make_algorithm(params, "rotary")
     c = COAST_CONSTANTS.array(1)
