@@ -33,7 +33,10 @@ def test_steady_speed_where_driving_torque_equals_eq9_friction(u_r):
     w, torque, _ = steady(plant, u_r)
     rot = plant.params.rotary
     n_rpm = w * RPM_PER_RAD_S
-    M_f = rot.M_c + rot.M_v * n_rpm  # Eq. 9, M_v per rpm as the paper gives it
+    s, p_a = plant.state, plant.params.ambient.p_a
+    T_seal = plant.params.coupling.k_seal * ((s.p_c1 - p_a) + (s.p_c2 - p_a))  # chambers > p_a
+    assert 0.0 < T_seal < 0.3 * rot.M_c
+    M_f = rot.M_c + T_seal + rot.M_v * n_rpm  # Eq. 9 (M_v per rpm as the paper gives it) + seals
     assert n_rpm > 300
     assert torque == pytest.approx(M_f, rel=0.01)
 
@@ -120,4 +123,6 @@ def test_reset_at_speed_holds_it_against_friction():
     rot = plant.params.rotary
     s = plant.state
     torque = plant.mean_vane_factor() * (s.p_m1 - s.p_m2)
-    assert torque == pytest.approx(rot.M_c + rot.M_v * 800, rel=1e-9)
+    p_a = plant.params.ambient.p_a
+    T_seal = plant.params.coupling.k_seal * ((s.p_c1 - p_a) + (s.p_c2 - p_a))
+    assert torque == pytest.approx(rot.M_c + T_seal + rot.M_v * 800, rel=1e-9)

@@ -48,7 +48,9 @@ def test_replay_matches_the_plant_within_the_daq_quantum():
 
 @pytest.mark.parametrize("axes", ["linear", "rotary"])
 def test_one_axis_replay_is_the_same_arithmetic(axes):
-    p = PlantParams()
+    # exact with the torque transmission module's coupling off (the axes then share no
+    # state); with it on, a one-axis replay holds the other axis at its start state
+    p = with_updates(PlantParams(), {"coupling.k_seal": 0.0, "coupling.mu_sleeve": 0.0})
     prm = rp.replay_params(p)
     plant = Plant(p, seed=0)
     plant.reset()
@@ -59,6 +61,22 @@ def test_one_axis_replay_is_the_same_arithmetic(axes):
     one = rp.replay(st.copy(), prm, ul, ur, axes)
     cols = [rp.R_PC1, rp.R_PC2, rp.R_X] if axes == "linear" else [rp.R_PM1, rp.R_TH, rp.R_OM]
     assert np.array_equal(both[:, cols], one[:, cols])
+
+
+@pytest.mark.parametrize("axes", ["linear", "rotary"])
+def test_one_axis_replay_with_coupling_holds_the_other_axis(axes):
+    p = PlantParams()
+    prm = rp.replay_params(p)
+    plant = Plant(p, seed=0)
+    plant.reset()
+    st = plant._st.copy()
+    ul = np.linspace(4.0, 6.5, 300)
+    ur = np.linspace(5.2, 6.2, 300)
+    both = rp.replay(st.copy(), prm, ul, ur, "both")
+    one = rp.replay(st.copy(), prm, ul, ur, axes)
+    cols = [rp.R_PC1, rp.R_PC2] if axes == "linear" else [rp.R_PM1, rp.R_OM]
+    assert not np.array_equal(both[:, cols], one[:, cols])  # the axes do couple
+    assert np.allclose(both[:, cols], one[:, cols], rtol=0.02, atol=1.0)  # a little
 
 
 def test_spool_trajectory_is_the_kernels_spool():

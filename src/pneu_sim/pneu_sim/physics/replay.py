@@ -211,7 +211,9 @@ def replay(
     """Step ``st`` (in place) under the voltages held in each period; returns (n, 6) outputs.
 
     ``axes``: ``both``, or ``linear`` / ``rotary`` to step only that axis (the
-    axes share no state; the other's outputs then hold their start values).
+    other's outputs then hold their start values; so does what couples the axes, the
+    chamber pressures in the seal torque and the sleeve torque S_TROD: exact with
+    ``coupling`` off, an approximation with it on).
 
     Row i is the sample at the end of period i: columns :data:`R_PC1`,
     :data:`R_PC2`, :data:`R_PM1` (Pa abs), :data:`R_X` (m), :data:`R_TH`
