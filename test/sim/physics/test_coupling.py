@@ -15,7 +15,7 @@ import pytest
 from pneu_msgs_py.contract.units import RPM_PER_RAD_S
 from pneu_msgs_py.params.core import ParamError, with_updates
 from pneu_sim.physics import kernel as k
-from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.params import K_SEAL_ESTIMATE, PlantParams
 from pneu_sim.physics.plant import Plant
 
 # the last commit whose kernel had no coupling, loads or second plumbing
@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[3]
 
 UNCOUPLED = {"coupling.k_seal": 0.0, "coupling.mu_sleeve": 0.0}
 SEALED = {"valve_linear.leak_fraction": 0.0, "valve_rotary.leak_fraction": 0.0}
+SEALS = {"coupling.k_seal": K_SEAL_ESTIMATE}  # the seal torque as estimated (nominal: off)
 
 
 def plant_with(updates, seed=0):
@@ -121,7 +122,7 @@ def test_spring_pulls_the_piston_towards_its_relaxed_position():
 
 def test_load_breakaway_holds_below_and_turns_above():
     big = 5.0
-    plant = plant_with({"load.T_bk": big})
+    plant = plant_with({**SEALS, "load.T_bk": big})
     plant.reset()
     u_r = 6.5  # turns the unloaded motor at several hundred rpm
     s = run_for(plant, 1.0, u_r=u_r)
@@ -194,7 +195,7 @@ def test_set_load_mid_run_is_deterministic_and_reaches_the_compiled_arrays():
 # ------------------------------------------------------------------ coupling
 def test_seal_friction_torque_grows_with_chamber_pressure():
     def steady(p_c):
-        plant = plant_with(SEALED)
+        plant = plant_with({**SEALED, **SEALS})
         plant.reset(x0=0.075)  # at the end stop: the pressures cannot move the piston
         plant.set_state(p_c1=p_c, p_c2=p_c)
         run_for(plant, 1.5, u_r=7.0)
@@ -223,7 +224,7 @@ def test_sleeve_friction_holds_the_piston_while_the_motor_passes_torque():
     F_push = 6.0
 
     def moved(T_c):
-        plant = plant_with({**SEALED, "load.T_c": T_c})
+        plant = plant_with({**SEALED, **SEALS, "load.T_c": T_c})
         plant.reset(omega0=600 / RPM_PER_RAD_S)
         lin = plant.params.linear
         p = plant.params.ambient.p_a + F_push / lin.A_r

@@ -7,7 +7,7 @@ import pytest
 from pneu_msgs_py.params.core import with_updates
 from pneu_sim.physics import kernel as k
 from pneu_sim.physics import replay as rp
-from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.params import K_SEAL_ESTIMATE, PlantParams
 from pneu_sim.physics.plant import Plant
 
 
@@ -65,7 +65,7 @@ def test_one_axis_replay_is_the_same_arithmetic(axes):
 
 @pytest.mark.parametrize("axes", ["linear", "rotary"])
 def test_one_axis_replay_with_coupling_holds_the_other_axis(axes):
-    p = PlantParams()
+    p = with_updates(PlantParams(), {"coupling.k_seal": K_SEAL_ESTIMATE})
     prm = rp.replay_params(p)
     plant = Plant(p, seed=0)
     plant.reset()
@@ -77,6 +77,27 @@ def test_one_axis_replay_with_coupling_holds_the_other_axis(axes):
     cols = [rp.R_PC1, rp.R_PC2] if axes == "linear" else [rp.R_PM1, rp.R_OM]
     assert not np.array_equal(both[:, cols], one[:, cols])  # the axes do couple
     assert np.allclose(both[:, cols], one[:, cols], rtol=0.02, atol=1.0)  # a little
+
+
+def test_rotary_replay_fed_the_recorded_chamber_pressures_follows_the_coupled_one():
+    p = with_updates(PlantParams(), {"coupling.k_seal": K_SEAL_ESTIMATE})
+    prm = rp.replay_params(p)
+    plant = Plant(p, seed=0)
+    plant.reset()
+    st = plant._st.copy()
+    n = 600
+    ul = 5.0 + 1.5 * np.sin(np.arange(n) * 0.02)  # the piston moves: p_c1, p_c2 swing
+    ur = np.full(n, 6.5)
+    both = rp.replay(st.copy(), prm, ul, ur, "both")
+    fed = np.column_stack([both[:, rp.R_PC1], both[:, rp.R_PC2]])
+    fed = np.vstack([[st[k.S_PC1], st[k.S_PC2]], fed[:-1]])  # at the start of each period
+    fed[10] = np.nan  # a lost sample keeps the previous values
+    held = rp.replay(st.copy(), prm, ul, ur, "rotary")
+    feed = rp.replay(st.copy(), prm, ul, ur, "rotary", p_c=fed)
+    err = lambda a: np.abs(a[:, rp.R_OM] - both[:, rp.R_OM]).max()  # noqa: E731
+    assert err(feed) < 0.2 * err(held)
+    with pytest.raises(ValueError, match="p_c"):
+        rp.replay(st.copy(), prm, ul, ur, "linear", p_c=fed)
 
 
 def test_spool_trajectory_is_the_kernels_spool():

@@ -144,9 +144,8 @@ TAB_DU = 0.01
 VB_SIZE = VB_TAB + TAB_N
 P_VALVE_R = P_VALVE_L + VB_SIZE
 # coupling and loads (appended: the indices above are those of the paper-only twin)
-P_PLUMB = (
-    P_VALVE_R + VB_SIZE
-)  # 0 = paper (motor port B -> silencer), 1 = bidirectional (B -> valve port 2)
+# rotary.plumbing: 0 = paper (motor port B -> silencer), 1 = bidirectional (B -> valve port 2)
+P_PLUMB = P_VALVE_R + VB_SIZE
 P_KSEAL = P_PLUMB + 1  # seal friction torque per Pa of chamber gauge pressure, N*m/Pa
 P_SLV = P_PLUMB + 2  # mu_sleeve / r_sleeve, 1/m
 P_TLC = P_PLUMB + 3  # load Coulomb torque, N*m
