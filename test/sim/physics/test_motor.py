@@ -8,7 +8,7 @@ from pneu_msgs_py.contract.units import RPM_PER_RAD_S
 from pneu_msgs_py.params.core import with_updates
 from pneu_sim.physics import kernel as k
 from pneu_sim.physics.pack import pack_params
-from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.params import K_SEAL_ESTIMATE, PlantParams
 from pneu_sim.physics.plant import Plant
 
 
@@ -28,12 +28,15 @@ def steady(plant, u_r, t_settle=2.0, t_avg=1.0):
 
 @pytest.mark.parametrize("u_r", [6.0, 7.5])
 def test_steady_speed_where_driving_torque_equals_eq9_friction(u_r):
-    plant = Plant(PlantParams())
+    plant = Plant(with_updates(PlantParams(), {"coupling.k_seal": K_SEAL_ESTIMATE}))
     plant.reset()
     w, torque, _ = steady(plant, u_r)
     rot = plant.params.rotary
     n_rpm = w * RPM_PER_RAD_S
-    M_f = rot.M_c + rot.M_v * n_rpm  # Eq. 9, M_v per rpm as the paper gives it
+    s, p_a = plant.state, plant.params.ambient.p_a
+    T_seal = plant.params.coupling.k_seal * ((s.p_c1 - p_a) + (s.p_c2 - p_a))  # chambers > p_a
+    assert 0.0 < T_seal < 0.3 * rot.M_c
+    M_f = rot.M_c + T_seal + rot.M_v * n_rpm  # Eq. 9 (M_v per rpm as the paper gives it) + seals
     assert n_rpm > 300
     assert torque == pytest.approx(M_f, rel=0.01)
 
@@ -112,12 +115,15 @@ def test_inlet_vents_to_atmosphere_below_5V_and_motor_stops():
     assert s.p_m2 == pytest.approx(p_a, rel=1e-3)
 
 
-def test_reset_at_speed_holds_it_against_friction():
-    plant = Plant(PlantParams())
+@pytest.mark.parametrize("k_seal", [0.0, K_SEAL_ESTIMATE])
+def test_reset_at_speed_holds_it_against_friction(k_seal):
+    plant = Plant(with_updates(PlantParams(), {"coupling.k_seal": k_seal}))
     w0 = 800 / RPM_PER_RAD_S
     sample = plant.reset(omega0=w0)
     assert abs(sample.omega - w0) <= 2 * math.pi / (4 * 1000 * plant.T)
     rot = plant.params.rotary
     s = plant.state
     torque = plant.mean_vane_factor() * (s.p_m1 - s.p_m2)
-    assert torque == pytest.approx(rot.M_c + rot.M_v * 800, rel=1e-9)
+    p_a = plant.params.ambient.p_a
+    T_seal = plant.params.coupling.k_seal * ((s.p_c1 - p_a) + (s.p_c2 - p_a))
+    assert torque == pytest.approx(rot.M_c + T_seal + rot.M_v * 800, rel=1e-9)

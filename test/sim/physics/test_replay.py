@@ -7,7 +7,7 @@ import pytest
 from pneu_msgs_py.params.core import with_updates
 from pneu_sim.physics import kernel as k
 from pneu_sim.physics import replay as rp
-from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.params import K_SEAL_ESTIMATE, PlantParams
 from pneu_sim.physics.plant import Plant
 
 
@@ -48,7 +48,9 @@ def test_replay_matches_the_plant_within_the_daq_quantum():
 
 @pytest.mark.parametrize("axes", ["linear", "rotary"])
 def test_one_axis_replay_is_the_same_arithmetic(axes):
-    p = PlantParams()
+    # exact with the torque transmission module's coupling off (the axes then share no
+    # state); with it on, a one-axis replay holds the other axis at its start state
+    p = with_updates(PlantParams(), {"coupling.k_seal": 0.0, "coupling.mu_sleeve": 0.0})
     prm = rp.replay_params(p)
     plant = Plant(p, seed=0)
     plant.reset()
@@ -59,6 +61,43 @@ def test_one_axis_replay_is_the_same_arithmetic(axes):
     one = rp.replay(st.copy(), prm, ul, ur, axes)
     cols = [rp.R_PC1, rp.R_PC2, rp.R_X] if axes == "linear" else [rp.R_PM1, rp.R_TH, rp.R_OM]
     assert np.array_equal(both[:, cols], one[:, cols])
+
+
+@pytest.mark.parametrize("axes", ["linear", "rotary"])
+def test_one_axis_replay_with_coupling_holds_the_other_axis(axes):
+    p = with_updates(PlantParams(), {"coupling.k_seal": K_SEAL_ESTIMATE})
+    prm = rp.replay_params(p)
+    plant = Plant(p, seed=0)
+    plant.reset()
+    st = plant._st.copy()
+    ul = np.linspace(4.0, 6.5, 300)
+    ur = np.linspace(5.2, 6.2, 300)
+    both = rp.replay(st.copy(), prm, ul, ur, "both")
+    one = rp.replay(st.copy(), prm, ul, ur, axes)
+    cols = [rp.R_PC1, rp.R_PC2] if axes == "linear" else [rp.R_PM1, rp.R_OM]
+    assert not np.array_equal(both[:, cols], one[:, cols])  # the axes do couple
+    assert np.allclose(both[:, cols], one[:, cols], rtol=0.02, atol=1.0)  # a little
+
+
+def test_rotary_replay_fed_the_recorded_chamber_pressures_follows_the_coupled_one():
+    p = with_updates(PlantParams(), {"coupling.k_seal": K_SEAL_ESTIMATE})
+    prm = rp.replay_params(p)
+    plant = Plant(p, seed=0)
+    plant.reset()
+    st = plant._st.copy()
+    n = 600
+    ul = 5.0 + 1.5 * np.sin(np.arange(n) * 0.02)  # the piston moves: p_c1, p_c2 swing
+    ur = np.full(n, 6.5)
+    both = rp.replay(st.copy(), prm, ul, ur, "both")
+    fed = np.column_stack([both[:, rp.R_PC1], both[:, rp.R_PC2]])
+    fed = np.vstack([[st[k.S_PC1], st[k.S_PC2]], fed[:-1]])  # at the start of each period
+    fed[10] = np.nan  # a lost sample keeps the previous values
+    held = rp.replay(st.copy(), prm, ul, ur, "rotary")
+    feed = rp.replay(st.copy(), prm, ul, ur, "rotary", p_c=fed)
+    err = lambda a: np.abs(a[:, rp.R_OM] - both[:, rp.R_OM]).max()  # noqa: E731
+    assert err(feed) < 0.2 * err(held)
+    with pytest.raises(ValueError, match="p_c"):
+        rp.replay(st.copy(), prm, ul, ur, "linear", p_c=fed)
 
 
 def test_spool_trajectory_is_the_kernels_spool():

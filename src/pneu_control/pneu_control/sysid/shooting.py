@@ -153,9 +153,13 @@ def simulate(
     states = initial_states(rec, seg, offsets, spools)
     parts = []
     ul, ur = rec.u["linear"], rec.u["rotary"]
+    p_c = None
+    if axes == "rotary":  # the seal torque reads the cylinder's pressures: feed the recorded ones
+        p_c = np.column_stack([rec.y[c] - offsets.get(c, 0.0) for c in ("p_c1", "p_c2")])
     for i0, n, s0 in zip(seg.starts.tolist(), seg.lengths.tolist(), states):
         st = rp.replay_state(prm, params, kbar=kbar, **s0)
-        parts.append(rp.replay(st, prm, ul[i0 : i0 + n], ur[i0 : i0 + n], axes))
+        pc = None if p_c is None else p_c[i0 : i0 + n]
+        parts.append(rp.replay(st, prm, ul[i0 : i0 + n], ur[i0 : i0 + n], axes, pc))
     sim = np.concatenate(parts) if parts else np.zeros((0, rp.N_REPLAY))
     out = {name: sim[:, _COL[name]] for name in SIGNALS}
     for name, off in offsets.items():

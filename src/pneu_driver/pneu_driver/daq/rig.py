@@ -32,6 +32,7 @@ __all__ = [
     "DECODING_FACTOR",
     "DIG_FILTERS",
     "ENCODER_PFI",
+    "ROTARY_PLUMBINGS",
     "load_rig_params",
 ]
 
@@ -53,6 +54,9 @@ ENCODER_PFI = {
     "ctr1": {"port1/line3": "PFI3 (A)", "port1/line4": "PFI4 (Z)", "port2/line3": "PFI11 (B)"},
 }
 _TIMING = ("sample_clock", "on_demand")
+# How valve #2 is piped to the motor: paper = port 4 -> motor port A, port B through a
+# silencer; bidirectional = port 4 -> A, port 2 -> B (the twin's rotary.plumbing too)
+ROTARY_PLUMBINGS = ("paper", "bidirectional")
 
 
 @dataclass(frozen=True)
@@ -400,6 +404,14 @@ class RigParams:
         hi=1.2e5,
         desc="ambient pressure added to gauge readings",
         source="ISO 2533 standard atmosphere",
+    )
+    rotary_plumbing: str = param(
+        "paper",
+        choices=ROTARY_PLUMBINGS,
+        desc="valve #2 piping: paper = port 4 -> motor port A, port B exhausts through a"
+        " silencer (one direction); bidirectional = also port 2 -> motor port B (u < 5 V"
+        " brakes and reverses); ai p_m1 stays on port A",
+        read_only=True,
     )
     channels: ChannelMap = param(ChannelMap)
     ai: AiParams = param(AiParams)

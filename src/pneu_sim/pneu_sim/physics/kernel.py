@@ -15,18 +15,23 @@ Integration (per substep h = T / n_sub, inputs held over T):
 1. Valve spools: exact zero-order-hold discretisation of
    s'' = ω_n² (u − s) − 2 ζ ω_n s' (exact for any h), stroke clamped to 0..10 V,
    then a play operator of width ``hysteresis`` gives the effective opening y.
-2. Piston (Eq. 1 with errata −A_r p_a): Karnopp stick/slip, semi-implicit Euler,
-   viscous term implicit; sliding friction Eq. 2 with S(ẋ) → sign(ẋ) plus a Stribeck
-   breakaway bump; a velocity that would cross zero within a step stops (stick).
+2. Piston (Eq. 1 with errata −A_r p_a, plus the external force F_ext − k_spring (x − x_0)):
+   Karnopp stick/slip, semi-implicit Euler, viscous term implicit; sliding friction Eq. 2
+   with S(ẋ) → sign(ẋ) plus a Stribeck breakaway bump, raised by the sleeve's friction
+   μ_sleeve |T_rod| / r_sleeve (the torque the sleeve passes, from the last motor substep);
+   a velocity that would cross zero within a step stops (stick).
    End stops ±L/2: exact inelastic clamp (x clamped, outward v → 0): never passes,
    never gains energy.
 3. Chambers (Eq. 4–5, polytropic n): the volume term is integrated exactly,
    p ← p (V_old/V_new)^n, so with no flow p V^n is conserved to rounding; the flow
    term is linearly implicit with the analytic ∂ṁ/∂p of the ISO 6358 flow, which
    keeps the stiff dead-volume dynamics stable at h = 0.1 ms.
-4. Motor (Eq. 6–10): same stick/slip scheme on θ, ω; inlet p_m1 fed by the valve and
-   drained by the swept displacement and leakage; exhaust p_m2 filled by them and
-   drained through the silencer orifice; both linearly implicit.
+4. Motor (Eq. 6–10): same stick/slip scheme on θ, ω, inertia J_m + J_load; friction Eq. 9
+   raised by the cylinder seals' torque k_seal Σ(p_c − p_a)+ and the load (T_c, breakaway
+   T_bk, c_load); inlet p_m1 (port A) fed by the valve's port 4 and drained by the swept
+   displacement and leakage; p_m2 (port B) filled by them and drained through the silencer
+   orifice (paper plumbing) or through the valve's port 2 (bidirectional: fed from supply
+   when u < 5 V); both linearly implicit.
 5. Sensors: first-order lags (exact per substep).
 
 The scheme is first order in h; test_sim_integrator shows the convergence.
@@ -64,7 +69,8 @@ S_T = 20  # time, s
 S_CNT = 21  # encoder counts at the last tick (exact integer in float64)
 S_UL = 22  # AO value held on the linear valve, V
 S_UR = 23  # AO value held on the rotary valve, V
-N_STATE = 24
+S_TROD = 24  # torque the sleeve passes to the rod side (seals + load), N*m, >= 0
+N_STATE = 25
 
 # ---------------------------------------------------------------- parameter layout
 P_PA = 0
@@ -137,7 +143,19 @@ TAB_N = 501
 TAB_DU = 0.01
 VB_SIZE = VB_TAB + TAB_N
 P_VALVE_R = P_VALVE_L + VB_SIZE
-N_PRM = P_VALVE_R + VB_SIZE
+# coupling and loads (appended: the indices above are those of the paper-only twin)
+# rotary.plumbing: 0 = paper (motor port B -> silencer), 1 = bidirectional (B -> valve port 2)
+P_PLUMB = P_VALVE_R + VB_SIZE
+P_KSEAL = P_PLUMB + 1  # seal friction torque per Pa of chamber gauge pressure, N*m/Pa
+P_SLV = P_PLUMB + 2  # mu_sleeve / r_sleeve, 1/m
+P_TLC = P_PLUMB + 3  # load Coulomb torque, N*m
+P_TLS = P_PLUMB + 4  # load static (breakaway) torque max(T_bk, T_c), N*m
+P_CLD = P_PLUMB + 5  # load viscous, N*m*s/rad
+P_JLD = P_PLUMB + 6  # load inertia, kg*m^2
+P_KSP = P_PLUMB + 7  # spring on the rod, N/m
+P_X0 = P_PLUMB + 8  # its relaxed position, m
+P_FEXT = P_PLUMB + 9  # constant force on the rod, N
+N_PRM = P_PLUMB + 10
 
 # sensor output layout
 O_PC1 = 0
@@ -216,8 +234,9 @@ def area_fraction(prm, base, du):
 def valve_areas(prm, base, y):
     """Areas of the 5/3 paths for effective opening y (V).
 
-    Returns (A_s4, A_4e, A_s2, A_2e): supply→port 4 (chamber 1 / motor inlet),
-    port 4→exhaust, supply→port 2 (chamber 2), port 2→exhaust. u > 5 V opens
+    Returns (A_s4, A_4e, A_s2, A_2e): supply→port 4 (chamber 1 / motor port A),
+    port 4→exhaust, supply→port 2 (chamber 2 / motor port B in bidirectional
+    plumbing), port 2→exhaust. u > 5 V opens
     supply→4 and 2→exhaust; u < 5 V the reverse. Every path leaks A_leak at the
     centre; on the closing paths the leak fades out over the first table step.
     """
@@ -337,10 +356,19 @@ def substep_linear(st, prm, u_l, h):
     p2 = st[S_PC2]
     half = 0.5 * prm[P_L]
     F = prm[P_AC1] * p1 - prm[P_AC2] * p2 - prm[P_AR] * pa
+    F_load = prm[P_FEXT] - prm[P_KSP] * (x - prm[P_X0])  # external force and spring
+    if F_load != 0.0:
+        F += F_load
+    F_c = prm[P_AF]
+    F_s = prm[P_FS]
+    F_sl = prm[P_SLV] * st[S_TROD]  # sleeve on the I shaft: μ |T_rod| / r (estimated form)
+    if F_sl > 0.0:
+        F_c += F_sl
+        F_s += F_sl
     if v == 0.0 and ((x >= half and F > 0.0) or (x <= -half and F < 0.0)):
         v_new = 0.0  # held by the end stop
     else:
-        v_new = stick_slip(v, F, prm[P_M], prm[P_AF], prm[P_FS], prm[P_VS], prm[P_CV], h)
+        v_new = stick_slip(v, F, prm[P_M], F_c, F_s, prm[P_VS], prm[P_CV], h)
     x_new = x + h * v_new
     if x_new >= half:  # inelastic end stop
         x_new = half
@@ -388,6 +416,9 @@ def substep_linear(st, prm, u_l, h):
 def substep_rotary(st, prm, u_r, h, K):
     """The motor axis over h seconds: valve #2 spool, motor, its chambers, the inlet sensor lag.
 
+    Reads p_c1, p_c2 (seal torque) as the linear substep left them; writes S_TROD, which
+    the next linear substep reads (sleeve friction).
+
     ``K`` = K(θ) at the current angle (Eq. 8, :func:`vane_factor`); returns K at the new angle.
     """
     pa = prm[P_PA]
@@ -402,11 +433,34 @@ def substep_rotary(st, prm, u_r, h, K):
     pm1 = st[S_PM1]
     pm2 = st[S_PM2]
     M_m = K * (pm1 - pm2)  # Eq. 8
-    om_new = stick_slip(om, M_m, prm[P_J], prm[P_MC], prm[P_MS], 0.0, prm[P_MV], h)
+    # seal friction torque of the turning piston and rods (estimated form, see CouplingParams)
+    g1 = st[S_PC1] - pa
+    g2 = st[S_PC2] - pa
+    T_seal = prm[P_KSEAL] * ((g1 if g1 > 0.0 else 0.0) + (g2 if g2 > 0.0 else 0.0))
+    T_lc = prm[P_TLC]
+    c_ld = prm[P_CLD]
+    J_ld = prm[P_JLD]
+    om_new = stick_slip(
+        om,
+        M_m,
+        prm[P_J] + J_ld,
+        prm[P_MC] + T_seal + T_lc,
+        prm[P_MS] + T_seal + prm[P_TLS],
+        0.0,
+        prm[P_MV] + c_ld,
+        h,
+    )
+    # torque through the sleeve: what the rod side resists (seals, load, load inertia)
+    if om_new != 0.0:
+        sg = 1.0 if om_new > 0.0 else -1.0
+        T_rod = abs(sg * (T_seal + T_lc) + c_ld * om_new + J_ld * (om_new - om) / h)
+    else:  # stuck: statically indeterminate; at most what the motor applies
+        T_rod = min(abs(M_m), T_seal + prm[P_TLS])
+    st[S_TROD] = T_rod
     th_new = th + h * om_new
     K = vane_factor(prm, th_new)
     br = P_VALVE_R
-    A_s4, A_4e, _a2, _a3 = valve_areas(prm, br, y_r)
+    A_s4, A_4e, A_s2, A_2e = valve_areas(prm, br, y_r)
     b = prm[br + VB_B]
     bla = prm[br + VB_BLAM]
     mi, _d, dmi = iso_flow(prm[P_PSR], pm1, A_s4 * C, b, bla)
@@ -427,9 +481,14 @@ def substep_rotary(st, prm, u_r, h, K):
     if om_new >= 0.0:
         msw = K * om_new * pm1n / RT
     mlk = klk * (pm1n - pm2)
-    mex, dmex, _d = iso_flow(pm2, pa, prm[P_KEX], prm[br + VB_B], prm[br + VB_BLAM])
     cm2 = n * RT / prm[P_VM2]
-    pm2n = implicit_pressure(pm2, cm2, msw + mlk - mex, dmsw2 - klk - dmex, h)
+    if prm[P_PLUMB] == 0.0:  # paper: port B vents through the silencer
+        mex, dmex, _d = iso_flow(pm2, pa, prm[P_KEX], prm[br + VB_B], prm[br + VB_BLAM])
+        pm2n = implicit_pressure(pm2, cm2, msw + mlk - mex, dmsw2 - klk - dmex, h)
+    else:  # bidirectional: port B on the valve's port 2 (supply when u < 5 V, else exhaust)
+        mi2, _d, dmi2 = iso_flow(prm[P_PSR], pm2, A_s2 * C, b, bla)
+        mo2, dmo2, _d = iso_flow(pm2, pa, A_2e * C, b, bla)
+        pm2n = implicit_pressure(pm2, cm2, msw + mlk + mi2 - mo2, dmsw2 - klk + dmi2 - dmo2, h)
     st[S_TH] = th_new
     st[S_OM] = om_new
     st[S_PM1] = pm1n
@@ -443,8 +502,9 @@ def substep_rotary(st, prm, u_r, h, K):
 def substep(st, prm, u_l, u_r, h, K):
     """Advance both axes and the sensor lags by h seconds (inputs u_l, u_r held).
 
-    The axes share no state (each has its own valve, chambers and sensors), so
-    stepping one after the other is the same arithmetic as interleaved. ``K`` =
+    The axes couple through the torque transmission module only: the motor reads the chamber
+    pressures this substep's linear step left (seal torque), the piston the sleeve torque
+    the previous motor substep left (S_TROD). ``K`` =
     K(θ) at the current angle (Eq. 8, :func:`vane_factor`); returns K at the new angle.
     """
     substep_linear(st, prm, u_l, h)

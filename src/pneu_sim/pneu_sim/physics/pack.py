@@ -11,9 +11,9 @@ import math
 import numpy as np
 
 from pneu_sim.physics import kernel as k
-from pneu_sim.physics.params import PlantParams, ValveParams
+from pneu_sim.physics.params import PLUMBINGS, LoadParams, PlantParams, ValveParams
 
-__all__ = ["pack_params", "valve_max_area", "spool_zoh", "nominal_flow_per_area"]
+__all__ = ["pack_params", "pack_load", "valve_max_area", "spool_zoh", "nominal_flow_per_area"]
 
 
 def nominal_flow_per_area(v: ValveParams, C_1: float) -> float:
@@ -133,4 +133,20 @@ def pack_params(p: PlantParams, offsets_unit: np.ndarray | None = None) -> np.nd
     prm[k.P_H] = h
     prm[k.P_VALVE_L : k.P_VALVE_L + k.VB_SIZE] = _valve_block(p.valve_linear, amb.C_1, h)
     prm[k.P_VALVE_R : k.P_VALVE_R + k.VB_SIZE] = _valve_block(p.valve_rotary, amb.C_1, h)
+    prm[k.P_PLUMB] = PLUMBINGS.index(rot.plumbing)
+    cp = p.coupling
+    prm[k.P_KSEAL] = cp.k_seal
+    prm[k.P_SLV] = cp.mu_sleeve / cp.r_sleeve
+    pack_load(prm, p.load)
     return prm
+
+
+def pack_load(prm: np.ndarray, ld: LoadParams) -> None:
+    """Write the external loads into ``prm`` in place (Plant.set_load between steps)."""
+    prm[k.P_TLC] = ld.T_c
+    prm[k.P_TLS] = max(ld.T_bk, ld.T_c)
+    prm[k.P_CLD] = ld.c_load
+    prm[k.P_JLD] = ld.J_load
+    prm[k.P_KSP] = ld.k_spring
+    prm[k.P_X0] = ld.x_0
+    prm[k.P_FEXT] = ld.F_ext

@@ -22,6 +22,7 @@ import itertools
 import math
 from dataclasses import dataclass
 
+from pneu_driver.daq.rig import ROTARY_PLUMBINGS
 from pneu_msgs_py.contract.valve_chart import MPYE_DU_V, MPYE_FLOW
 from pneu_msgs_py.params.core import ParamError, param
 
@@ -31,6 +32,8 @@ __all__ = [
     "LinearParams",
     "ValveParams",
     "RotaryParams",
+    "CouplingParams",
+    "LoadParams",
     "PressureSensorParams",
     "LaserParams",
     "EncoderParams",
@@ -42,9 +45,16 @@ __all__ = [
     "PlantConfigError",
     "MPYE_DU_V",
     "MPYE_FLOW",
+    "PLUMBINGS",
+    "LOAD_FIELDS",
+    "K_SEAL_ESTIMATE",
 ]
 
 P_ATM = 101325.0
+
+
+# How valve #2 is piped to the motor (rotary.plumbing), as rig.yaml's rotary_plumbing.
+PLUMBINGS = ROTARY_PLUMBINGS
 
 
 class PlantConfigError(ParamError):
@@ -499,6 +509,19 @@ class RotaryParams:
         source="estimated: 5e-5 kg/s (≈ 2.5 l/min ANR) at 1 bar, ≈ 15 % of the 800 rpm consumption; range ×/÷ 2 (estimated)",
         band=(2.5e-10, 1e-09),
     )
+    plumbing: str = param(
+        "paper",
+        unit="-",
+        choices=PLUMBINGS,
+        desc="valve #2 to motor piping: paper = port 4 -> motor port A only, port B exhausts"
+        " through the silencer (drives one way, stops by friction); bidirectional = port 4 ->"
+        " port A, port 2 -> port B (u > 5 V drives forward, u < 5 V brakes and reverses)",
+        source="paper (Fig. 4 and text: one valve feeds the motor inlet, the exhaust chamber"
+        " vents through a silencer); bidirectional: the MPYE is a 5/3 valve and the paper's"
+        " 1AM-NRV is the reversible 1AM variant (Gast model code, not verified against a"
+        " datasheet); a housing exhaust of the reversible 1AM, if it has one, is not modelled (no datasheet in reach)",
+        read_only=True,
+    )
 
     def _check(self) -> None:
         if not self.r_m < self.R_m:
@@ -513,6 +536,127 @@ class RotaryParams:
     def M_v_si(self) -> float:
         """M_v in N·m·s/rad."""
         return self.M_v * 60.0 / (2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class CouplingParams:
+    """The torque transmission module couples the axes (paper, "Linear-rotary composite motion
+    pneumatic actuator"): the motor turns the piston, piston rod and transmission rod inside the
+    cylinder's seals, and the sleeve slides on the transmission rod's "I" shaft."""
+
+    k_seal: float = param(
+        0.0,
+        unit="N*m/Pa",
+        lo=0.0,
+        hi=1e-5,
+        desc="seal friction torque on the motor per Pa of chamber gauge pressure:"
+        " T_seal = k_seal ((p_c1 - p_a)+ + (p_c2 - p_a)+), added to M_c",
+        source="estimated (the paper is silent; its M_c is read as measured with the cylinder vented):"
+        " a lip pressed by gauge p on a band b over its circumference gives a friction force"
+        " mu pi d b p at radius d/2 when the rod turns, torque mu pi b d^2 p / 2; per chamber one"
+        " piston lip (d = 32 mm) and one rod seal (12 mm: piston rod at the front cover,"
+        " transmission rod at the rear cover, the latter's diameter estimated):"
+        " k = mu pi b (D^2 + d^2) / 2 with mu = 0.1 (lubricated elastomer on steel), b = 0.5 mm,"
+        " i.e. 0.5 N per bar axially on the piston lip, k = 9.2e-8 (K_SEAL_ESTIMATE); nominal 0 (off):"
+        " with it on, the MPYE's centre leakage at 5 V leaves the motor at the edge of its creep"
+        " (stick-slip), where a replay's speed hangs on sub-kPa pressure errors and the rotary"
+        " identification of a known plant fails (held-out p_m1 fit 68-73 % with the true plant);"
+        " range 0 to 3x the estimate (mu 0.05-0.2, b 0.3-1 mm)",
+        band=(0.0, 2.8e-07),
+    )
+    mu_sleeve: float = param(
+        0.15,
+        unit="-",
+        lo=0.0,
+        hi=1.0,
+        desc="friction coefficient of the sleeve on the transmission rod's I-shaped shaft",
+        source="estimated: 430F stainless on 430F stainless (paper), greased: 0.1-0.2;"
+        " range 0.05 (well lubricated) to 0.5 (dry stainless on stainless)",
+        band=(0.05, 0.5),
+    )
+    r_sleeve: float = param(
+        3e-3,
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+        hi=0.05,
+        desc="lever arm of the sleeve's flat contacts: F_sleeve = mu_sleeve |T_rod| / r_sleeve",
+        source="estimated: the paper gives no dimensions of the I-shaped shaft; two flat faces"
+        " about 3 mm from the axis carry the torque as a couple (normal force T/(2 r) on each);"
+        " range 2-5 mm (estimated)",
+        band=(0.002, 0.005),
+    )
+
+
+# k_seal as estimated in its source (CouplingParams.k_seal; nominal 0)
+K_SEAL_ESTIMATE = 9.2e-8
+
+# The load fields Plant.set_load can change between steps (task segments).
+LOAD_FIELDS = ("T_c", "T_bk", "c_load", "J_load", "k_spring", "x_0", "F_ext")
+_LOAD_SOURCE = "task setting: no external load in the paper's experiments (default 0 = off)"
+
+
+@dataclass(frozen=True)
+class LoadParams:
+    """External loads set by a task (all off by default); ``Plant.set_load`` changes them
+    between steps. The rotary ones act on the piston rod's output and pass the sleeve."""
+
+    T_c: float = param(
+        0.0,
+        unit="N*m",
+        lo=0.0,
+        hi=10.0,
+        desc="load Coulomb (sliding) friction torque on the rotary output",
+        source=_LOAD_SOURCE,
+    )
+    T_bk: float = param(
+        0.0,
+        unit="N*m",
+        lo=0.0,
+        hi=10.0,
+        desc="load breakaway torque: the load holds still while |torque| <= max(T_bk, T_c)",
+        source=_LOAD_SOURCE,
+    )
+    c_load: float = param(
+        0.0,
+        unit="N*m*s/rad",
+        lo=0.0,
+        hi=1.0,
+        desc="load viscous torque per rad/s",
+        source=_LOAD_SOURCE,
+    )
+    J_load: float = param(
+        0.0,
+        unit="kg*m^2",
+        lo=0.0,
+        hi=1.0,
+        desc="inertia added to the rotary output (on top of rotary.J_m)",
+        source=_LOAD_SOURCE,
+    )
+    k_spring: float = param(
+        0.0,
+        unit="N/m",
+        lo=0.0,
+        hi=1e6,
+        desc="spring on the rod: F = -k_spring (x - x_0)",
+        source=_LOAD_SOURCE,
+    )
+    x_0: float = param(
+        0.0,
+        unit="m",
+        lo=-1.0,
+        hi=1.0,
+        desc="position where the spring is relaxed (preload at x = 0: k_spring x_0)",
+        source=_LOAD_SOURCE,
+    )
+    F_ext: float = param(
+        0.0,
+        unit="N",
+        lo=-1e4,
+        hi=1e4,
+        desc="constant external force on the rod, + = extending",
+        source=_LOAD_SOURCE,
+    )
 
 
 @dataclass(frozen=True)
@@ -686,7 +830,8 @@ class SimParams:
 
 @dataclass(frozen=True)
 class PlantParams:
-    """The whole twin. Groups: ambient, supply, linear, valve_linear, valve_rotary, rotary, sensors, sim."""
+    """The whole twin. Groups: ambient, supply, linear, valve_linear, valve_rotary, rotary,
+    coupling, load, sensors, sim."""
 
     ambient: AmbientParams = param(AmbientParams)
     supply: SupplyParams = param(SupplyParams)
@@ -694,6 +839,8 @@ class PlantParams:
     valve_linear: ValveParams = param(ValveParams)
     valve_rotary: ValveParams = param(ValveParams)
     rotary: RotaryParams = param(RotaryParams)
+    coupling: CouplingParams = param(CouplingParams)
+    load: LoadParams = param(LoadParams)
     sensors: SensorParams = param(SensorParams)
     sim: SimParams = param(SimParams)
 

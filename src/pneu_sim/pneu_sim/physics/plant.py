@@ -12,8 +12,16 @@ Model summary (equations as in Jia et al.; corrections per errata.md):
   from Festo's flow-vs-setpoint chart (dead band ≈ ±0.35 V comes out of it),
   centre leakage, 2nd-order spool, hysteresis (play).
 - Motor, Eq. 6–10: vane torque with its ripple (period 2π/n_vanes), Eq. 9 friction
-  (M_v per rpm converted), inlet chamber fed by valve 2 and drained by the swept
-  displacement K(θ)·ω and leakage, exhaust chamber vented through the silencer.
+  (M_v per rpm converted), inlet chamber (port A) fed by valve 2 and drained by the swept
+  displacement K(θ)·ω and leakage; port B vented through the silencer (``rotary.plumbing:
+  paper``) or on the valve's second port (``bidirectional``: the same valve brakes and
+  reverses the motor).
+- Coupling through the torque transmission module (``coupling``): the cylinder seals'
+  friction torque on the turning rod grows with the chamber pressures; the sleeve's
+  friction on the linear axis grows with the torque it passes.
+- External loads (``load``, all off by default; :meth:`Plant.set_load` between steps):
+  load torque (Coulomb, breakaway, viscous), added rotary inertia, a spring and a
+  constant force on the rod.
 - Sensors: first-order lags, noise, fixed offsets within the pressure sensors'
   accuracy, 16-bit AI; X4 encoder counts and ω from Δcounts over T; 16-bit AO.
 
@@ -27,11 +35,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from pneu_msgs_py.contract.samples import NEUTRAL_V, SensorSample
-from pneu_msgs_py.params.core import ParamError, validate
+from pneu_msgs_py.params.core import ParamError, validate, with_updates
 
 from pneu_sim.physics import kernel as k
-from pneu_sim.physics.pack import pack_params
-from pneu_sim.physics.params import PlantParams
+from pneu_sim.physics.pack import pack_load, pack_params
+from pneu_sim.physics.params import LOAD_FIELDS, PlantParams
 
 __all__ = ["Plant", "TrueState", "neutral_leak_pressure"]
 
@@ -57,6 +65,7 @@ class TrueState:
     m_c2: float  # gas mass chamber 2, kg
     u_linear: float  # AO value held, V
     u_rotary: float  # V
+    T_rod: float  # torque the sleeve passes to the rod side (seals + load), N*m
 
 
 def neutral_leak_pressure(prm: np.ndarray, base: int, p_s: float, p_a: float) -> float:
@@ -125,9 +134,11 @@ class Plant:
     def reset(self, x0: float = 0.0, omega0: float = 0.0) -> SensorSample:
         """Restart at rest at x0 (m) with the motor at omega0 (rad/s); returns sample k = 0.
 
-        Linear: p_c2 at the valve's centre-leakage equilibrium, p_c1 so that Eq. 1 is
-        balanced (no drift at t = 0). Rotary: p_m2 = p_a, p_m1 = p_a + M_f(ω0)/K̄ (the
-        inlet pressure that holds ω0 against Eq. 9). Spools at 5 V. The noise stream
+        Linear: p_c2 at the valve's centre-leakage equilibrium, p_c1 so that Eq. 1 with
+        the external force is balanced (no drift at t = 0; a force pushing out raises p_c2
+        instead). Rotary: p_m2 = p_a (paper plumbing) or the rotary valve's centre-leakage
+        pressure (bidirectional), p_m1 = p_m2 + M_f(ω0)/K̄ (the inlet pressure that holds
+        ω0 against Eq. 9, the seals' torque and the load). Spools at 5 V. The noise stream
         restarts from the seed.
         """
         p = self.params
@@ -147,17 +158,32 @@ class Plant:
         st = np.zeros(k.N_STATE)
         half = 0.5 * lin.L
         p_ref = neutral_leak_pressure(self._prm, k.P_VALVE_L, p.supply.p_s_linear, p_a)
+        ld = p.load
+        F_load = ld.F_ext - ld.k_spring * (x0 - ld.x_0)
         p_c2 = p_ref
         p_c1 = (lin.A_c2 * p_c2 + lin.A_r * p_a) / lin.A_c1
+        if F_load < 0.0:  # pulled in: chamber 1 holds it
+            p_c1 = (lin.A_c2 * p_c2 + lin.A_r * p_a - F_load) / lin.A_c1
+        elif F_load > 0.0:  # pushed out: chamber 2 holds it
+            p_c2 = (lin.A_c1 * p_c1 - lin.A_r * p_a + F_load) / lin.A_c2
         st[k.S_X] = x0
         st[k.S_PC1] = p_c1
         st[k.S_PC2] = p_c2
         st[k.S_MC1] = p_c1 * (lin.V_1d + lin.A_c1 * (half + x0)) / RT
         st[k.S_MC2] = p_c2 * (lin.V_2d + lin.A_c2 * (half - x0)) / RT
         st[k.S_OM] = omega0
-        M_f = (math.copysign(rot.M_c, omega0) if omega0 != 0.0 else 0.0) + rot.M_v_si * omega0
-        st[k.S_PM1] = p_a + M_f / self.mean_vane_factor()
-        st[k.S_PM2] = p_a
+        T_seal = p.coupling.k_seal * (max(p_c1 - p_a, 0.0) + max(p_c2 - p_a, 0.0))
+        T_coul = rot.M_c + T_seal + ld.T_c
+        M_f = (math.copysign(T_coul, omega0) if omega0 != 0.0 else 0.0) + (
+            rot.M_v_si + ld.c_load
+        ) * omega0
+        p_m2 = p_a
+        if rot.plumbing == "bidirectional":
+            p_m2 = neutral_leak_pressure(self._prm, k.P_VALVE_R, p.supply.p_s_rotary, p_a)
+        st[k.S_PM1] = p_m2 + M_f / self.mean_vane_factor()
+        st[k.S_PM2] = p_m2
+        if omega0 != 0.0:
+            st[k.S_TROD] = T_seal + ld.T_c + ld.c_load * abs(omega0)
         for i in (k.S_SL, k.S_YL, k.S_SR, k.S_YR, k.S_UL, k.S_UR):
             st[i] = NEUTRAL_V
         st[k.S_FP1] = st[k.S_PC1]
@@ -255,6 +281,7 @@ class Plant:
             m_c2=s[k.S_MC2],
             u_linear=s[k.S_UL],
             u_rotary=s[k.S_UR],
+            T_rod=s[k.S_TROD],
         )
 
     def set_state(self, **values: float) -> None:
@@ -301,7 +328,23 @@ class Plant:
             )
         prm = pack_params(params, self._offsets_unit)
         self.params = params
-        self._prm = prm
+        self._prm[:] = prm  # in place: kernel_arrays() callers keep a live vector
+
+    def set_load(self, **values: float) -> None:
+        """Change external loads (``load.*`` names: T_c, T_bk, c_load, J_load, k_spring,
+        x_0, F_ext; SI) between steps, keeping the state.
+
+        For tasks that switch loads between segments: the new values act from the next
+        :meth:`step` (or compiled ``step_period``) on, so a run stays fully set by config,
+        seed and the steps at which loads change. Written into the live parameter vector
+        of :meth:`kernel_arrays`. Validated as one set; refused whole on a bad name or value.
+        """
+        for name, val in values.items():
+            if name not in LOAD_FIELDS:
+                raise ParamError(f"load.{name}", val, "one of " + ", ".join(LOAD_FIELDS))
+        params = with_updates(self.params, {f"load.{n}": v for n, v in values.items()})
+        self.params = params
+        pack_load(self._prm, params.load)
 
     def mean_vane_factor(self) -> float:
         """K̄: mean of Eq. 8's geometric factor over a vane sector, m³ (torque / Δp)."""

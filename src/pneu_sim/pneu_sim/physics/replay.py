@@ -41,6 +41,7 @@ __all__ = [
     "replay",
     "replay_params",
     "replay_state",
+    "rod_torque",
     "spool_trajectory",
 ]
 
@@ -52,11 +53,16 @@ AXES_CODE = {"both": 0, "linear": 1, "rotary": 2}
 
 
 @njit(cache=True)
-def _replay(st, prm, u_l, u_r, out, which):
+def _replay(st, prm, u_l, u_r, out, which, p_c):
     nsub = int(prm[k.P_NSUB])
     h = prm[k.P_H]
     T = prm[k.P_T]
+    feed = which == 2 and p_c.shape[0] == u_l.shape[0]
     for i in range(u_l.shape[0]):
+        if feed:  # the held cylinder's pressures, as recorded (the seal torque reads them)
+            if math.isfinite(p_c[i, 0]) and math.isfinite(p_c[i, 1]):
+                st[k.S_PC1] = p_c[i, 0]
+                st[k.S_PC2] = p_c[i, 1]
         ul = k.ao_value(prm, u_l[i])
         ur = k.ao_value(prm, u_r[i])
         st[k.S_UL] = ul
@@ -165,8 +171,10 @@ def replay_state(
 
     Spools from ``spool_linear`` / ``spool_rotary`` (position, velocity,
     opening: :func:`spool_trajectory`) or else at rest at the voltages held
-    during the previous period (the spool settles in a few ms); p_m2 quasi-steady (:func:`exhaust_pressure`);
-    sensor lags at the measured values; gas masses p V / (R T0).
+    during the previous period (the spool settles in a few ms); p_m2 quasi-steady (:func:`exhaust_pressure`;
+    the paper's plumbing: in the bidirectional one p_m2 is neither measured nor quasi-steady);
+    sensor lags at the measured values; gas masses p V / (R T0); the sleeve's torque
+    from these (:func:`rod_torque`).
     """
     st = np.zeros(k.N_STATE)
     lin = params.linear
@@ -198,7 +206,20 @@ def replay_state(
     st[k.S_FP2] = p_c2
     st[k.S_FPM1] = p_m1
     st[k.S_FX] = x
+    st[k.S_TROD] = rod_torque(prm, p_c1, p_c2, st[k.S_PM1], st[k.S_PM2], omega, kbar)
     return st
+
+
+def rod_torque(
+    prm: np.ndarray, p_c1: float, p_c2: float, p_m1: float, p_m2: float, omega: float, kbar: float
+) -> float:
+    """The torque the sleeve passes to the rod side (N·m), as the kernel's motor step sets it:
+    turning, the seals' torque plus the load; at rest, at most what the motor applies."""
+    pa = prm[k.P_PA]
+    T_seal = prm[k.P_KSEAL] * (max(p_c1 - pa, 0.0) + max(p_c2 - pa, 0.0))
+    if omega != 0.0:
+        return T_seal + prm[k.P_TLC] + prm[k.P_CLD] * abs(omega)
+    return min(abs(kbar * (p_m1 - p_m2)), T_seal + prm[k.P_TLS])
 
 
 def replay(
@@ -207,11 +228,17 @@ def replay(
     u_linear: np.ndarray,
     u_rotary: np.ndarray,
     axes: str = "both",
+    p_c: np.ndarray | None = None,
 ) -> np.ndarray:
     """Step ``st`` (in place) under the voltages held in each period; returns (n, 6) outputs.
 
     ``axes``: ``both``, or ``linear`` / ``rotary`` to step only that axis (the
-    axes share no state; the other's outputs then hold their start values).
+    other's outputs then hold their start values; so does what couples the axes, the
+    chamber pressures in the seal torque and the sleeve torque S_TROD: exact with
+    ``coupling`` off, an approximation with it on). ``p_c``: with ``axes="rotary"``, the
+    cylinder's chamber pressures (n, 2: p_c1, p_c2, Pa abs) at the start of each period,
+    e.g. as recorded, for the seal torque instead of the held start values (a non-finite
+    row keeps the previous values).
 
     Row i is the sample at the end of period i: columns :data:`R_PC1`,
     :data:`R_PC2`, :data:`R_PM1` (Pa abs), :data:`R_X` (m), :data:`R_TH`
@@ -223,6 +250,9 @@ def replay(
         raise ValueError("u_linear and u_rotary must be 1-D arrays of equal length")
     if axes not in AXES_CODE:
         raise ValueError(f"axes: {axes!r} refused; allowed: one of {', '.join(AXES_CODE)}")
+    pc = np.zeros((0, 2)) if p_c is None else np.ascontiguousarray(p_c, dtype=np.float64)
+    if p_c is not None and (axes != "rotary" or pc.shape != (u_l.shape[0], 2)):
+        raise ValueError("p_c: an (n, 2) array of chamber pressures, with axes='rotary' only")
     out = np.empty((u_l.shape[0], N_REPLAY))
-    _replay(st, prm, u_l, u_r, out, AXES_CODE[axes])
+    _replay(st, prm, u_l, u_r, out, AXES_CODE[axes], pc)
     return out
