@@ -48,6 +48,7 @@ __all__ = [
     "analysis_figures",
     "writer_comparison",
     "reader_comparison",
+    "serialized_comparison",
 ]
 
 PERIOD_NS = 1_000_000
@@ -555,6 +556,70 @@ def writer_comparison(
     return out
 
 
+def serialized_comparison(
+    seconds: float = 20.0, repeats: int = 3, chunk_size: int = 1 << 20, directory: str | None = None
+) -> dict[str, dict[str, float]]:
+    """The ROS logger's path: already-CDR messages one at a time, per writer (best of ``repeats``).
+
+    The messages of a typical ``seconds``-long run (BagWriter bag, read back by
+    ``mcap``) in log-time order, written by ``pneu`` (``BagWriter.write_serialized``)
+    and by ``mcap.Writer`` (``register_schema``/``register_channel`` on first use,
+    ``add_message``), ``chunk_size``-byte zstd chunks. Same figures as
+    :func:`writer_comparison`.
+    """
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+
+    from pneu_msgs_py.bag.schemas import MESSAGE_ENCODING, MSG_DEFINITIONS, PROFILE
+    from pneu_msgs_py.bag.schemas import SCHEMA_ENCODING as ENC
+
+    n = int(seconds * 1000)
+    out: dict[str, dict[str, float]] = {}
+    with tempfile.TemporaryDirectory(dir=directory) as d:
+        src = Path(d) / "src.mcap"
+        write_synthetic_run(src, n)
+        with open(src, "rb") as f:
+            msgs = [
+                (c.topic, s.name, m.data, m.log_time, m.publish_time)
+                for s, c, m in make_reader(f).iter_messages()
+            ]
+
+        def pneu(path: Path) -> None:
+            with BagWriter(path, chunk_size=chunk_size) as w:
+                for topic, ros_type, data, lt, pt in msgs:
+                    w.write_serialized(topic, ros_type, data, lt, pt)
+
+        def library(path: Path) -> None:
+            with open(path, "wb") as f:
+                w = Writer(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+                w.start(PROFILE, "bench")
+                schemas: dict[str, int] = {}
+                channels: dict[str, int] = {}
+                seq: dict[int, int] = {}
+                for topic, ros_type, data, lt, pt in msgs:
+                    cid = channels.get(topic)
+                    if cid is None:
+                        sid = schemas.get(ros_type)
+                        if sid is None:
+                            text = MSG_DEFINITIONS[ros_type].encode()
+                            sid = schemas[ros_type] = w.register_schema(ros_type, ENC, text)
+                        cid = channels[topic] = w.register_channel(topic, MESSAGE_ENCODING, sid)
+                    k = seq[cid] = seq.get(cid, -1) + 1
+                    w.add_message(cid, lt, data, pt, k)
+                w.finish()
+
+        for name, write in {"pneu write_serialized": pneu, "mcap.Writer": library}.items():
+            path = Path(d) / "out.mcap"
+            best = math.inf
+            for _ in range(repeats):
+                path.unlink(missing_ok=True)
+                t0 = time.perf_counter()
+                write(path)
+                best = min(best, time.perf_counter() - t0)
+            out[name] = _figures(path, best, n)
+    return out
+
+
 def _figures(path: Path, wall: float, n_cycles: int) -> dict[str, float]:
     msgs, payload = _bag_numbers(path)
     return {
@@ -651,6 +716,11 @@ def main(argv: list[str] | None = None) -> int:
         _print_table(
             "write (best of 3; mcap_ros2 once, on 5 s)",
             writer_comparison(a.seconds, directory=a.dir),
+            ["s", "us_per_cycle", "msgs_per_s", "payload_mb_per_s", "file_mib"],
+        )
+        _print_table(
+            "write, already-CDR messages one at a time (the ROS logger's path; best of 3)",
+            serialized_comparison(a.seconds, directory=a.dir),
             ["s", "us_per_cycle", "msgs_per_s", "payload_mb_per_s", "file_mib"],
         )
         _print_table(
