@@ -5,25 +5,30 @@ Every record is written as the ``mcap`` library's record object
 paths need and the library does one Python object at a time (about 6 µs per
 message record through ``mcap.Writer``, see :mod:`pneu_msgs_py.bag`): the
 message record header as a struct and a numpy dtype (fixed-size records built
-by the thousand), message indexes from numpy arrays, and :class:`Cursor`, the
-bounds-checked parser the tolerant reader needs. All integers little endian.
+by the thousand) and message indexes from numpy arrays. Records are read by the
+library's parsers too, made bounds-checked by :func:`parse` (the tolerant
+reader must know a record is damaged). All integers little endian.
 """
 
 from __future__ import annotations
 
+import io
 import struct
+from typing import TypeVar
 
 import numpy as np
-from mcap.data_stream import RecordBuilder
+from mcap.data_stream import ReadDataStream, RecordBuilder
+from mcap.exceptions import EndOfFile
 from mcap.opcode import Opcode as Op
 from mcap.records import McapRecord
 from mcap.writer import MCAP0_MAGIC as MAGIC
 
-__all__ = ["MAGIC", "Op", "record_bytes", "message_index", "Cursor"]
+__all__ = ["MAGIC", "Op", "record_bytes", "message_index", "parse"]
+
+_Rec = TypeVar("_Rec", bound=McapRecord)
 
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
-_U64 = struct.Struct("<Q")
 _REC = struct.Struct("<BQ")
 
 #: Message record header: opcode, length, channel_id, sequence, log_time, publish_time.
@@ -61,59 +66,30 @@ FOOTER_SIZE = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset
 # -- parsing --------------------------------------------------------------------
 
 
-class Cursor:
-    """Sequential little-endian reads from a bytes-like object; IndexError past the end."""
+class _Body(ReadDataStream):
+    """A record body for ``mcap.records.X.read``, bounds-checked: damage raises IndexError.
 
-    __slots__ = ("buf", "end", "pos")
+    The library's stream returns a short read as it is (a cut string, a short
+    schema); the tolerant reader needs to know the record is damaged.
+    """
 
-    def __init__(self, buf: bytes | memoryview, pos: int = 0, end: int | None = None) -> None:
-        self.buf = buf
-        self.pos = pos
-        self.end = len(buf) if end is None else end
+    def __init__(self, body: bytes | memoryview) -> None:
+        super().__init__(io.BytesIO(body))
 
-    def _need(self, n: int) -> int:
-        p = self.pos
-        if p + n > self.end:
+    def read(self, length: int) -> bytes:
+        try:
+            data = super().read(length)
+        except EndOfFile:
+            raise IndexError("record field past end") from None
+        if len(data) < length:
             raise IndexError("record field past end")
-        self.pos = p + n
-        return p
+        return data
 
-    def u8(self) -> int:
-        return self.buf[self._need(1)]
 
-    def u16(self) -> int:
-        return _U16.unpack_from(self.buf, self._need(2))[0]
+def parse(record_type: type[_Rec], body: bytes | memoryview) -> _Rec:
+    """The record of ``record_type`` (``mcap.records``) in ``body`` (after opcode and length).
 
-    def u32(self) -> int:
-        return _U32.unpack_from(self.buf, self._need(4))[0]
-
-    def u64(self) -> int:
-        return _U64.unpack_from(self.buf, self._need(8))[0]
-
-    def raw(self, n: int) -> bytes:
-        p = self._need(n)
-        return bytes(self.buf[p : p + n])
-
-    def string(self) -> str:
-        return self.raw(self.u32()).decode("utf-8")
-
-    def bytes32(self) -> bytes:
-        return self.raw(self.u32())
-
-    def str_map(self) -> dict[str, str]:
-        n = self.u32()
-        stop = self.pos + n
-        out = {}
-        while self.pos < stop:
-            k = self.string()
-            out[k] = self.string()
-        return out
-
-    def u16_u64_map(self) -> dict[int, int]:
-        n = self.u32()
-        stop = self.pos + n
-        out = {}
-        while self.pos < stop:
-            k = self.u16()
-            out[k] = self.u64()
-        return out
+    Raises IndexError (a field past the end), UnicodeDecodeError or struct.error
+    on a damaged body.
+    """
+    return record_type.read(_Body(body))
