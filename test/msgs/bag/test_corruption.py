@@ -14,7 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
+from mcap.records import Message
+from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap_ros2.reader import read_ros2_messages
 from pneu_msgs_py.bag import BagError, BagWriter
 from pneu_msgs_py.bag.reader import read_run
@@ -94,6 +97,34 @@ def test_a_damaged_chunk_is_skipped_and_its_messages_counted(bag, tmp_path):
     assert rep.messages == d.message_count == independent_count(fixed)
     rec = read_run(fixed).metadata["pneu.recovered"]
     assert rec["lost"] == str(lost) and rec["damaged_chunks"] == "1"
+
+
+def test_the_mcap_library_cannot_read_past_damage_pneu_can(bag, tmp_path):
+    """Why pneu keeps its tolerant reader (see pneu_msgs_py.bag): mcap's readers stop at a
+    damaged chunk (its CRC checked) and at a cut end; they do not skip and read on."""
+    chunks = chunks_of(bag)
+    start, length, counts = chunks[2]
+    bad = flipped(bag, tmp_path / "bad.mcap", start + length // 2)
+    with open(bad, "rb") as f, pytest.raises(CRCValidationError):
+        for _ in make_reader(f, validate_crcs=True).iter_messages(log_time_order=False):
+            pass
+    before = sum(sum(c.values()) for _, _, c in chunks[:2])
+    with open(bad, "rb") as f:
+        records = StreamReader(f, validate_crcs=True).records
+        got = 0
+        with pytest.raises(CRCValidationError):
+            for rec in records:
+                got += isinstance(rec, Message)
+        assert got == before  # the chunks before the damaged one, then the reader is done
+        assert next(records, None) is None
+    with pytest.warns(UserWarning, match="chunk skipped"):
+        assert read_run(bad).message_count == read_run(bag).message_count - sum(counts.values())
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(bag.read_bytes()[: bag.stat().st_size // 2])
+    with open(cut, "rb") as f, pytest.raises(McapError):
+        next(make_reader(f).iter_messages())
+    with pytest.warns(UserWarning, match="truncated"):
+        assert read_run(cut).message_count > 0
 
 
 def test_a_damaged_summary_is_not_trusted_and_nothing_is_lost(bag, tmp_path):

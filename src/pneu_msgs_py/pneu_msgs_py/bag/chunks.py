@@ -164,9 +164,18 @@ def interleave(batches: list[Batch]) -> tuple[bytes | np.ndarray, dict[int, np.n
     order = np.argsort(lts, kind="stable")
     start = np.empty_like(sizes)
     start[order] = np.concatenate([[0], np.cumsum(sizes[order])[:-1]])
-    out = np.empty(int(sizes.sum()), dtype=np.uint8)
+    out: Any
+    if not fixed:  # only variable records (the ROS logger): one join, no per-record copy
+        recs = [r for b in batches for r in b.records]
+        out = b"".join([recs[i] for i in order.tolist()])
+    else:
+        out = np.empty(int(sizes.sum()), dtype=np.uint8)
     k = 0
     for b in batches:
+        if not fixed:
+            offsets[id(b)] = start[k : k + len(b.log_times)]
+            k += len(b.log_times)
+            continue
         n = len(b.log_times)
         pos = start[k : k + n]
         k += n

@@ -23,6 +23,8 @@ import zlib
 from collections.abc import Mapping
 from pathlib import Path
 
+from mcap import records as M
+
 from pneu_msgs_py.bag import mcap_records as R
 from pneu_msgs_py.bag.chunks import Batch, Channel, interleave
 from pneu_msgs_py.bag.errors import BagWriteError
@@ -40,6 +42,10 @@ __all__ = ["COMPRESSIONS", "PARTIAL_SUFFIX", "McapContainer"]
 
 COMPRESSIONS = ("zstd", "lz4", "none")
 PARTIAL_SUFFIX = ".partial"  # the same convention as pneu_msgs_py.lifecycle.outputs
+
+
+def _schema(sid: int, ros_type: str, text: bytes) -> bytes:
+    return R.record_bytes(M.Schema(id=sid, data=text, encoding=SCHEMA_ENCODING, name=ros_type))
 
 
 class McapContainer:
@@ -77,12 +83,12 @@ class McapContainer:
         self.schemas: dict[str, tuple[int, bytes]] = {}
         self._schema_text: dict[str, bytes] = {}
         self.channels: dict[str, Channel] = {}
-        self._chunk_indexes: list[bytes] = []
-        self._metadata_indexes: list[bytes] = []
+        self._chunk_indexes: list[M.ChunkIndex] = []
+        self._metadata_indexes: list[M.MetadataIndex] = []
         self._n_metadata = 0
         self.t_start: int | None = None
         self.t_end: int | None = None
-        self._write(R.MAGIC + R.header(PROFILE, library))
+        self._write(R.MAGIC + R.record_bytes(M.Header(profile=PROFILE, library=library)))
 
     def _write(self, data: bytes) -> None:
         self._f.write(data)
@@ -112,7 +118,7 @@ class McapContainer:
                 # foreign type via write_serialized: definition unknown here
                 schema_text = MSG_DEFINITIONS.get(ros_type, "").encode("utf-8")
             self._schema_text[ros_type] = schema_text
-            self.schemas[ros_type] = (sid, R.schema(sid, ros_type, SCHEMA_ENCODING, schema_text))
+            self.schemas[ros_type] = (sid, _schema(sid, ros_type, schema_text))
         sid = self.schemas[ros_type][0]
         cid = len(self.channels) + 1
         qos = qos_for(topic, self.qos_mode)
@@ -126,7 +132,11 @@ class McapContainer:
                 "topic_type_hash": TYPE_HASHES.get(ros_type, ""),
             }
         )
-        ch.record = R.channel(cid, sid, topic, MESSAGE_ENCODING, meta)
+        ch.record = R.record_bytes(
+            M.Channel(
+                id=cid, topic=topic, message_encoding=MESSAGE_ENCODING, metadata=meta, schema_id=sid
+            )
+        )
         self.channels[topic] = ch
         return ch
 
@@ -139,11 +149,14 @@ class McapContainer:
                 raise BagWriteError(
                     self.path, f"metadata {name}[{k!r}]: keys and values must be str, got {v!r}"
                 )
-        rec = R.metadata(name, dict(data))
-        self._metadata_indexes.append(R.metadata_index(self._pos, len(rec), name))
+        self._write_metadata(name, dict(data))
+        self._f.flush()
+
+    def _write_metadata(self, name: str, data: dict[str, str]) -> None:
+        rec = R.record_bytes(M.Metadata(name=name, metadata=data))
+        self._metadata_indexes.append(M.MetadataIndex(offset=self._pos, length=len(rec), name=name))
         self._n_metadata += 1
         self._write(rec)
-        self._f.flush()
 
     def write_chunk(self, batches: list[Batch]) -> None:
         """One chunk of ``batches`` with its message indexes and chunk index; flushed to the OS."""
@@ -174,7 +187,16 @@ class McapContainer:
         crc = zlib.crc32(raw)
         comp = self._compress(raw) if self._compress else bytes(raw)
         chunk_start = self._pos
-        crec = R.chunk(t_min, t_max, len(raw), crc, self._comp_name, comp)
+        crec = R.record_bytes(
+            M.Chunk(
+                compression=self._comp_name,
+                data=comp,
+                message_end_time=t_max,
+                message_start_time=t_min,
+                uncompressed_crc=crc,
+                uncompressed_size=len(raw),
+            )
+        )
         self._write(crec)
         mi_start = self._pos
         mi_offsets: dict[int, int] = {}
@@ -188,16 +210,16 @@ class McapContainer:
         self._write(b"".join(mi))
         self._f.flush()
         self._chunk_indexes.append(
-            R.chunk_index(
-                t_min,
-                t_max,
-                chunk_start,
-                len(crec),
-                mi_offsets,
-                self._pos - mi_start,
-                self._comp_name,
-                len(comp),
-                len(raw),
+            M.ChunkIndex(
+                chunk_length=len(crec),
+                chunk_start_offset=chunk_start,
+                compression=self._comp_name,
+                compressed_size=len(comp),
+                message_end_time=t_max,
+                message_index_length=self._pos - mi_start,
+                message_index_offsets=mi_offsets,
+                message_start_time=t_min,
+                uncompressed_size=len(raw),
             )
         )
 
@@ -212,20 +234,17 @@ class McapContainer:
                     self.schemas[ch.ros_type] = (sid, b"")
                 self._write(ch.record)
                 ch.emitted = True
-        rec = R.metadata("rosbag2", {"serialized_metadata": rosbag2_yaml})
-        self._metadata_indexes.append(R.metadata_index(self._pos, len(rec), "rosbag2"))
-        self._n_metadata += 1
-        self._write(rec)
-        self._write(R.data_end(self._crc))
+        self._write_metadata("rosbag2", {"serialized_metadata": rosbag2_yaml})
+        self._write(R.record_bytes(M.DataEnd(data_section_crc=self._crc)))
         summary_start = self._pos
         summary_crc = 0
         groups: list[tuple[int, int, int]] = []
 
-        def group(op: int, recs: list[bytes]) -> None:
+        def group(op: int, recs: list) -> None:
             nonlocal summary_crc
             if not recs:
                 return
-            blob = b"".join(recs)
+            blob = b"".join(r if isinstance(r, bytes) else R.record_bytes(r) for r in recs)
             groups.append((op, self._pos, len(blob)))
             self._f.write(blob)
             summary_crc = zlib.crc32(blob, summary_crc)
@@ -234,36 +253,43 @@ class McapContainer:
         schema_recs = []
         for ros_type, (sid, _) in sorted(self.schemas.items(), key=lambda kv: kv[1][0]):
             text = self._schema_text[ros_type]
-            schema_recs.append(R.schema(sid, ros_type, SCHEMA_ENCODING, text))
+            schema_recs.append(_schema(sid, ros_type, text))
         group(R.Op.SCHEMA, schema_recs)
         group(R.Op.CHANNEL, [ch.record for ch in self.channels.values()])
         n_msgs = sum(ch.count for ch in self.channels.values())
-        group(
-            R.Op.STATISTICS,
-            [
-                R.statistics(
-                    n_msgs,
-                    len(self.schemas),
-                    len(self.channels),
-                    self._n_metadata,
-                    len(self._chunk_indexes),
-                    self.t_start or 0,
-                    self.t_end or 0,
-                    {ch.id: ch.count for ch in self.channels.values()},
-                )
-            ],
+        stats = M.Statistics(
+            attachment_count=0,
+            channel_count=len(self.channels),
+            channel_message_counts={ch.id: ch.count for ch in self.channels.values()},
+            chunk_count=len(self._chunk_indexes),
+            message_count=n_msgs,
+            message_end_time=self.t_end or 0,
+            message_start_time=self.t_start or 0,
+            metadata_count=self._n_metadata,
+            schema_count=len(self.schemas),
         )
+        group(R.Op.STATISTICS, [stats])
         group(R.Op.CHUNK_INDEX, self._chunk_indexes)
         group(R.Op.METADATA_INDEX, self._metadata_indexes)
         summary_offset_start = self._pos
-        so = b"".join(R.summary_offset(op, start, length) for op, start, length in groups)
+        so = b"".join(
+            R.record_bytes(M.SummaryOffset(group_opcode=op, group_start=at, group_length=n))
+            for op, at, n in groups
+        )
         self._f.write(so)
         summary_crc = zlib.crc32(so, summary_crc)
         self._pos += len(so)
         if not groups:
             summary_start = 0
             summary_offset_start = 0
-        foot = R.footer_prefix(summary_start, summary_offset_start)
+        # the footer's CRC covers the summary and the footer up to the CRC itself
+        foot = R.record_bytes(
+            M.Footer(
+                summary_start=summary_start,
+                summary_offset_start=summary_offset_start,
+                summary_crc=0,
+            )
+        )[:-4]
         summary_crc = zlib.crc32(foot, summary_crc)
         self._f.write(foot + summary_crc.to_bytes(4, "little") + R.MAGIC)
         self._f.flush()

@@ -23,35 +23,18 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
+from mcap import records as M
 
 from pneu_msgs_py.bag import mcap_records as R
 from pneu_msgs_py.bag.errors import BagError, NotMcapError, NotRos2Error, TruncatedBagError
 
-__all__ = ["McapFile", "SchemaInfo", "ChannelInfo", "Chunk", "CorruptBagError"]
+__all__ = ["McapFile", "Chunk", "CorruptBagError"]
 
 _REC = struct.Struct("<BQ")
-_CHUNK_HEAD = struct.Struct("<QQQI")
 
 
 class CorruptBagError(BagError):
     """A record inside the file is malformed (bad CRC, impossible length)."""
-
-
-@dataclass
-class SchemaInfo:
-    id: int
-    name: str
-    encoding: str
-    data: bytes
-
-
-@dataclass
-class ChannelInfo:
-    id: int
-    schema_id: int
-    topic: str
-    message_encoding: str
-    metadata: dict[str, str]
 
 
 @dataclass
@@ -129,8 +112,8 @@ class McapFile:
         except OSError as e:
             raise NotMcapError(self.path, f"cannot open: {e.strerror}") from None
         self.size = os.fstat(self._f.fileno()).st_size
-        self.schemas: dict[int, SchemaInfo] = {}
-        self.channels: dict[int, ChannelInfo] = {}
+        self.schemas: dict[int, M.Schema] = {}
+        self.channels: dict[int, M.Channel] = {}
         self.metadata: dict[str, dict[str, str]] = {}
         self.message_counts: dict[int, int] | None = None
         self.truncated = False
@@ -178,10 +161,9 @@ class McapFile:
             body = self._read_at(17, length)
             if len(body) < length:
                 raise TruncatedBagError(self.path, "file ends inside the MCAP header")
-            c = R.Cursor(body)
             try:
-                self.profile = c.string()
-                self.library = c.string()
+                header = R.parse(M.Header, body)
+                self.profile, self.library = header.profile, header.library
             except (IndexError, UnicodeDecodeError):
                 raise NotMcapError(self.path, "malformed MCAP header record") from None
         except NotMcapError as err:
@@ -236,23 +218,24 @@ class McapFile:
         try:
             while pos + 9 <= len(blob):
                 op, length = _REC.unpack_from(blob, pos)
-                c = R.Cursor(blob, pos + 9, pos + 9 + length)
-                if op == R.Op.SCHEMA:
-                    self._add_schema(c)
-                elif op == R.Op.CHANNEL:
-                    self._add_channel(c)
+                body = blob[pos + 9 : pos + 9 + length]
+                if op in (R.Op.SCHEMA, R.Op.CHANNEL):
+                    self._add_definition(op, body)
                 elif op == R.Op.STATISTICS:
-                    c.u64(), c.u16(), c.u32(), c.u32(), c.u32(), c.u32(), c.u64(), c.u64()
-                    self.message_counts = c.u16_u64_map()
+                    self.message_counts = R.parse(M.Statistics, body).channel_message_counts
                 elif op == R.Op.CHUNK_INDEX:
-                    c.u64(), c.u64()
-                    off, clen = c.u64(), c.u64()
-                    mio = c.u16_u64_map()
-                    mil = c.u64()
-                    chunks.append(_ChunkRef(off, clen, mil, mio))
+                    ci = R.parse(M.ChunkIndex, body)
+                    chunks.append(
+                        _ChunkRef(
+                            ci.chunk_start_offset,
+                            ci.chunk_length,
+                            ci.message_index_length,
+                            ci.message_index_offsets,
+                        )
+                    )
                 elif op == R.Op.METADATA_INDEX:
-                    off, mlen = c.u64(), c.u64()
-                    meta_refs.append((off, mlen))
+                    mi = R.parse(M.MetadataIndex, body)
+                    meta_refs.append((mi.offset, mi.length))
                 pos += 9 + length
         except IndexError:
             raise CorruptBagError(self.path, "malformed summary section") from None
@@ -263,23 +246,25 @@ class McapFile:
             raw = self._read_at(off, mlen)
             try:
                 if len(raw) == mlen and raw[0] == R.Op.METADATA:
-                    c = R.Cursor(raw, 9)
-                    name = c.string()
-                    self.metadata.setdefault(name, {}).update(c.str_map())
+                    self._add_metadata(raw[9:])
                 else:
                     raise IndexError
             except (IndexError, struct.error, UnicodeDecodeError):
                 self.warnings.append(f"metadata record at byte {off} unreadable: skipped")
         return True
 
-    def _add_schema(self, c: R.Cursor) -> None:
-        sid = c.u16()
-        self.schemas[sid] = SchemaInfo(sid, c.string(), c.string(), c.bytes32())
+    def _add_definition(self, op: int, body: bytes) -> None:
+        """A Schema or Channel record's body (IndexError, UnicodeDecodeError: damaged)."""
+        if op == R.Op.SCHEMA:
+            sch = R.parse(M.Schema, body)
+            self.schemas[sch.id] = sch
+        else:
+            ch = R.parse(M.Channel, body)
+            self.channels[ch.id] = ch
 
-    def _add_channel(self, c: R.Cursor) -> None:
-        cid = c.u16()
-        sch = c.u16()
-        self.channels[cid] = ChannelInfo(cid, sch, c.string(), c.string(), c.str_map())
+    def _add_metadata(self, body: bytes) -> None:
+        md = R.parse(M.Metadata, body)
+        self.metadata.setdefault(md.name, {}).update(md.metadata)
 
     def _scan_for_summary(self) -> None:
         """No usable summary: the chunk list is built while scanning in iter_chunks."""
@@ -325,16 +310,13 @@ class McapFile:
         op, length = _REC.unpack_from(raw, 0)
         if op != R.Op.CHUNK:
             raise CorruptBagError(self.path, f"no chunk record at byte {where}")
-        c = R.Cursor(raw, 9, min(9 + length, len(raw)))
         try:
-            _s, _e, usize, crc = _CHUNK_HEAD.unpack_from(raw, c._need(_CHUNK_HEAD.size))
-            comp = c.string()
-            n = c.u64()
-            start = c._need(n)
+            ch = R.parse(M.Chunk, raw[9 : 9 + length])
         except (IndexError, UnicodeDecodeError, struct.error):
             raise CorruptBagError(self.path, f"malformed chunk at byte {where}") from None
+        usize, crc = ch.uncompressed_size, ch.uncompressed_crc
         try:
-            data = _decompress(self.path, comp, raw[start : start + n], usize)
+            data = _decompress(self.path, ch.compression, ch.data, usize)
         except CorruptBagError as err:
             raise CorruptBagError(self.path, f"chunk at byte {where}: {err.problem}") from None
         if len(data) != usize:
@@ -360,12 +342,8 @@ class McapFile:
         while pos + 9 <= n:
             op, length = _REC.unpack_from(data, pos)
             if op in (R.Op.SCHEMA, R.Op.CHANNEL):
-                c = R.Cursor(data, pos + 9, min(pos + 9 + length, n))
                 try:
-                    if op == R.Op.SCHEMA:
-                        self._add_schema(c)
-                    else:
-                        self._add_channel(c)
+                    self._add_definition(op, data[pos + 9 : pos + 9 + length])
                 except (IndexError, UnicodeDecodeError, struct.error):
                     pass
             pos += 9 + length
@@ -440,16 +418,12 @@ class McapFile:
                         if pending.offsets is None:
                             pending.offsets = {}
                         pending.offsets[cid] = offs
-                elif op == R.Op.SCHEMA:
-                    self._add_schema(R.Cursor(body))
-                elif op == R.Op.CHANNEL:
-                    self._add_channel(R.Cursor(body))
+                elif op in (R.Op.SCHEMA, R.Op.CHANNEL):
+                    self._add_definition(op, body)
                 elif op == R.Op.MESSAGE:
                     loose.append(head + body)
                 elif op == R.Op.METADATA:
-                    c = R.Cursor(body)
-                    name = c.string()
-                    self.metadata.setdefault(name, {}).update(c.str_map())
+                    self._add_metadata(body)
                 elif op == R.Op.DATA_END:
                     ended = True
                     break

@@ -353,12 +353,15 @@ class BagWriter:
             for item in self._var:
                 by_topic.setdefault(item[0], []).append(item)
             self._var = []
+            pack, op = R.MESSAGE_HEADER.pack, R.Op.MESSAGE
             for topic, items in by_topic.items():
                 ch = self._mcap.channel(topic, items[0][1])
-                recs = []
-                for _, _, lt, pt, data in items:
-                    recs.append(R.message(ch.id, ch.seq & 0xFFFFFFFF, lt, pt, data))
-                    ch.seq += 1
+                cid, seq = ch.id, ch.seq
+                recs = [
+                    pack(op, 22 + len(data), cid, (seq + i) & 0xFFFFFFFF, lt, pt) + data
+                    for i, (_, _, lt, pt, data) in enumerate(items)
+                ]
+                ch.seq += len(items)
                 ch.count += len(items)
                 lts = np.array([it[2] for it in items], dtype=np.int64)
                 batches.append(Batch(ch, lts, records=recs))
