@@ -45,12 +45,13 @@ KNOWN_PRIVATE: set[tuple[str, str, str]] = {
 }
 
 MAX_FUNCTION_LINES = 80
-# Longer functions in folders being rewritten elsewhere: (module, function); remove when split.
+# Longer functions still to split: (module, function); remove an entry when it is split. The
+# compiled loop and the plant's rotary substep are numba kernels whose split is a
+# performance question (measure with pneu bench first); the bag's chunk interleave and scan
+# are the own container code kept by a measured reason (bag/__init__.py).
 KNOWN_LONG: set[tuple[str, str]] = {
-    ("pneu_control.fastloop.axis", "axis_update"),
     ("pneu_control.fastloop.loop", "closed_loop"),
-    ("pneu_control.fastloop.supervisor", "sup_check_sample"),
-    ("pneu_driver.safety.supervisor", "SafetySupervisor.check_sample"),
+    ("pneu_sim.physics.kernel", "substep_rotary"),
     ("pneu_msgs_py.bag.chunks", "interleave"),
     ("pneu_msgs_py.bag.mcap_file", "McapFile._scan"),
 }

@@ -202,6 +202,7 @@ ROLES = {
         "analysis",
         "sweep",
         "sysid",
+        "task",
         "nodes",
         "cli",
         "bench",

@@ -1,6 +1,6 @@
 """The kernels compiled against the same kernels run by CPython, on random inputs, bit for bit.
 
-One source, two executions (docs/design.md §11): the closed-loop tests
+One source, two executions (DESIGN §12): the closed-loop tests
 (test/control/experiment/test_compiled.py) cover the states a run visits; these reach
 every branch directly: the TD's linear and nonlinear zones, each reference kind over
 its whole time range, the rotary friction term (cosh ** 2: glibc pow, not x * x).

@@ -22,7 +22,7 @@ Per sample the controller calls exactly one of
   valve command never jumps.
 - ``update(inp) -> u`` -- every later sample.
 
-``KernelAlgorithm`` is the documented way to write one (docs/design.md §11): its
+``KernelAlgorithm`` is the documented way to write one (DESIGN §12): its
 steps are kernels on records, run here and in the compiled loop alike.
 Both return the saturated deviation and leave readable attributes:
 ``z1, z2, z3`` (observer states, NaN if none), ``s`` (sliding variable, NaN
@@ -53,7 +53,7 @@ __all__ = [
 NAN = float("nan")
 MAX_HISTORY = 6  # transport_delay_samples <= 5 (AxisControllerParams): d + 1 commands
 
-# One sample's input to an algorithm (paper units), a kernel record (docs/design.md §11),
+# One sample's input to an algorithm (paper units), a kernel record (DESIGN §12),
 # filled in place by the controller. ``y``, ``r``, ``r_dot``, ``r_ddot``: measurement and
 # reference with its derivatives (mm or rpm; with ``rotary_model: angle`` and a TD
 # algorithm, the angle θ and θ_r in rpm·s). ``u_applied``: the saturated deviation on the
@@ -117,7 +117,7 @@ class Algorithm(Protocol):
 
 
 class KernelAlgorithm:
-    """An :class:`Algorithm` whose steps are kernels on records (the documented way, §11).
+    """An :class:`Algorithm` whose steps are kernels on records (the documented way, DESIGN §12).
 
     A subclass declares ``name``, the flags, ``CONSTANTS`` and ``STATE`` (
     :class:`~pneu_msgs_py.params.records.RecordType`; ``STATE`` has at least ``z1, z2,

@@ -124,7 +124,7 @@ predicted over the transport delay with the commands already sent.
 Units: mm (linear) or rpm / rpm·s (rotary); λ 1/s; b0 (mm|rpm)/s²/V;
 ε (mm|rpm)/s²; commands V (deviation from 5 V).
 
-The step is written once, as kernels on records (docs/design.md §11):
+The step is written once, as kernels on records (DESIGN §12):
 :func:`plus_start`, :func:`plus_update`, :func:`plus_hint` on
 :data:`ESO_SMC_PLUS_CONSTANTS`, :data:`ESO_SMC_PLUS_STATE` and the valve chart
 (:mod:`.valve_curve`, rows du and flow); :class:`EsoSmcPlus` and the compiled loop

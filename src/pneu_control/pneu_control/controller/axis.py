@@ -106,7 +106,7 @@ class ControllerState:
 STATE_FIELDS: tuple[str, ...] = DEFAULT_STATE_FIELDS
 
 
-# The axis's own steps, kernels on records (docs/design.md §11): AxisController runs them
+# The axis's own steps, kernels on records (DESIGN §12): AxisController runs them
 # here, the compiled loop (pneu_control.fastloop) runs the same functions.
 AXIS_CONSTANTS = RecordType(
     "AxisConstants",

@@ -67,7 +67,7 @@ class Reference(Protocol):
 
 
 # Every kind is one record type (named fields; a kind uses its own) and one kernel
-# (docs/design.md §11): the classes below call it; the compiled loop calls it too.
+# (DESIGN §12): the classes below call it; the compiled loop calls it too.
 REF_SINE, REF_SMOOTH_STEP, REF_CONSTANT, REF_RAMP, REF_WAYPOINTS = 0, 1, 2, 3, 4
 REFERENCE = RecordType(
     "ReferenceConstants",

@@ -15,7 +15,9 @@ import math
 
 from numba import njit
 
+from pneu_control.algorithms.coast import Coast
 from pneu_control.algorithms.eso_smc import EsoSmc
+from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus
 from pneu_control.algorithms.ladrc import Ladrc
 from pneu_control.algorithms.pid import Pid
 from pneu_control.controller.axis import (
@@ -36,6 +38,8 @@ _NAN = math.nan
 _start0, _update0 = Pid.KERNEL.start, Pid.KERNEL.update
 _start1, _update1 = Ladrc.KERNEL.start, Ladrc.KERNEL.update
 _start2, _update2 = EsoSmc.KERNEL.start, EsoSmc.KERNEL.update
+_start3, _update3 = EsoSmcPlus.KERNEL.start, EsoSmcPlus.KERNEL.update
+_start4, _update4 = Coast.KERNEL.start, Coast.KERNEL.update
 
 
 @njit(**JIT)
@@ -44,7 +48,11 @@ def _start(code, a, algs, tab, inp):
         return _start0(algs[0][a], algs[1][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
     if code == 1:
         return _start1(algs[2][a], algs[3][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
-    return _start2(algs[4][a], algs[5][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
+    if code == 2:
+        return _start2(algs[4][a], algs[5][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
+    if code == 3:
+        return _start3(algs[6][a], algs[7][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
+    return _start4(algs[8][a], algs[9][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
 
 
 @njit(**JIT)
@@ -53,7 +61,11 @@ def _update(code, a, algs, tab, inp):
         return _update0(algs[0][a], algs[1][a], tab, inp)
     if code == 1:
         return _update1(algs[2][a], algs[3][a], tab, inp)
-    return _update2(algs[4][a], algs[5][a], tab, inp)
+    if code == 2:
+        return _update2(algs[4][a], algs[5][a], tab, inp)
+    if code == 3:
+        return _update3(algs[6][a], algs[7][a], tab, inp)
+    return _update4(algs[8][a], algs[9][a], tab, inp)
 
 
 @njit(**JIT)
@@ -63,7 +75,11 @@ def _estimates(code, a, algs):
         return _z(algs[1][a])
     if code == 1:
         return _z(algs[3][a])
-    return _z(algs[5][a])
+    if code == 2:
+        return _z(algs[5][a])
+    if code == 3:
+        return _z(algs[7][a])
+    return _z(algs[9][a])
 
 
 @njit(**JIT)

@@ -57,7 +57,7 @@ from pneu_msgs_py.contract.topics import (
 
 __all__ = ["BagWriter", "DiagStatus", "COMPRESSIONS"]
 
-_LIBRARY = f"pneu_msgs_py {__version__}"
+LIBRARY = f"pneu_msgs_py {__version__}"
 _HDR = R.MESSAGE_HEADER_SIZE
 
 
@@ -115,7 +115,7 @@ class BagWriter:
         self.qos_mode = qos
         self.state_fields = tuple(controller_state_fields)
         self.pressure_variance = float(pressure_variance)
-        self._mcap = McapContainer(self.path, _LIBRARY, compression, qos)
+        self._mcap = McapContainer(self.path, LIBRARY, compression, qos)
         self._closed = False
 
         # buffers (hot path)
@@ -421,7 +421,7 @@ class BagWriter:
             self.flush()
             m = self._mcap
             channels = list(m.channels.values())
-            m.finish(rosbag2_metadata(channels, self.path.name, m.t_start, m.t_end, _LIBRARY))
+            m.finish(rosbag2_metadata(channels, self.path.name, m.t_start, m.t_end, LIBRARY))
         finally:
             self._closed = True
             self._mcap.close()

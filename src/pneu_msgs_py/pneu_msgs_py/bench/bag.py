@@ -395,12 +395,12 @@ class _LibraryContainer:
 
 def _library_bag_writer(path: Path, **kw) -> BagWriter:
     """A BagWriter whose container is ``mcap.Writer`` (:class:`_LibraryContainer`)."""
-    from pneu_msgs_py.bag.writer import _LIBRARY
+    from pneu_msgs_py.bag.writer import LIBRARY
 
     w = BagWriter(path, **kw)
     w._mcap.close()
     w._mcap.partial_path.unlink()
-    w._mcap = _LibraryContainer(w.path, _LIBRARY, w.compression, w.qos_mode)
+    w._mcap = _LibraryContainer(w.path, LIBRARY, w.compression, w.qos_mode)
     return w
 
 

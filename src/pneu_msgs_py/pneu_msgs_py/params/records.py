@@ -1,4 +1,4 @@
-"""Kernel records: the one way a controller's or a safety rule's step is written (docs/design.md §11).
+"""Kernel records: the one way a controller's or a safety rule's step is written (DESIGN §12).
 
 A control step (an algorithm's ``start``/``update``, a reference, the TD, the axis
 logic, a supervisor rule) is written **once**, as a plain function on *records*:
