@@ -33,7 +33,9 @@ def test_targets_chain_and_durations_follow_the_speeds():
     assert s[1].theta_end == pytest.approx(math.radians(90.0))
     assert s[1].duration_s == pytest.approx(2 * 90.0 / (60.0 * DEG_S_PER_RPM))
     assert s[2].theta_end == pytest.approx(math.radians(90.0 + 720.0))
-    assert s[3].theta_end == pytest.approx(s[2].theta_end + math.radians(300 * 6.0 * 2.0))
+    assert s[3].theta_end == pytest.approx(
+        s[2].theta_end + math.radians(300 * 6.0 * (2.0 - 0.25))
+    )  # ramps
     assert s[4].x_end == pytest.approx(0.04 - 0.0045)  # pitch x turns, retracting
     assert s[4].theta_end == pytest.approx(s[3].theta_end + 6 * math.pi)
     assert s[5].x_start == s[4].x_end and s[5].duration_s == 0.5
