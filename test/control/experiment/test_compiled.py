@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from pneu_control.controller.params import ALGORITHMS
+from pneu_control.controller.params import ANGLE_ONLY_ALGORITHMS, AXIS_ALGORITHMS
 from pneu_control.experiment import compiled as compiled_mod
 from pneu_control.experiment.compiled import (
     CompiledLoopMismatch,
@@ -73,7 +73,7 @@ def spec_of(axes=("linear", "rotary"), controller=None, sets=(), file=RETUNED, *
 
 # ------------------------------------------------------------------ controllers × gains
 @pytest.mark.parametrize("file", [PAPER, RETUNED], ids=["paper", "retuned"])
-@pytest.mark.parametrize("controller", ALGORITHMS)
+@pytest.mark.parametrize("controller", AXIS_ALGORITHMS)
 def test_every_controller_both_axes_supervisor_on(controller, file):
     a, b = both(spec_of(controller=controller, file=file, seed=2))
     assert_same(a, b)
@@ -84,7 +84,7 @@ def test_every_controller_both_axes_supervisor_on(controller, file):
         assert np.all(b.applied["rotary"][-100:] == 5.0)
 
 
-@pytest.mark.parametrize("controller", ALGORITHMS)
+@pytest.mark.parametrize("controller", AXIS_ALGORITHMS)
 def test_every_controller_supervisor_off(controller):
     a, b = both(spec_of(controller=controller, safety=False, seed=5))
     assert_same(a, b)
@@ -194,7 +194,7 @@ def test_algorithm_options(controller, sets):
     assert_same(a, b)
 
 
-@pytest.mark.parametrize("controller", ALGORITHMS)
+@pytest.mark.parametrize("controller", AXIS_ALGORITHMS)
 @pytest.mark.parametrize("file", [PAPER, RETUNED], ids=["paper", "retuned"])
 def test_rotary_angle_model(controller, file):
     sets = ["rotary_model=angle"]
@@ -307,7 +307,7 @@ def test_a_compiled_output_that_differs_from_the_supervisor_is_caught(monkeypatc
 
 def test_configs_are_fully_compiled():
     for file in (PAPER, RETUNED):
-        for controller in ALGORITHMS:
+        for controller in AXIS_ALGORITHMS:
             assert compiled_support(spec_of(controller=controller, file=file)) is None
     assert compiled_mod.compiled_support.__doc__
 
@@ -326,8 +326,19 @@ def test_runs_in_threads_equal_runs_in_turn():
     """The loop releases the GIL; each run owns its arrays, so threads do not mix them."""
     from concurrent.futures import ThreadPoolExecutor
 
-    specs = [spec_of(controller=c, duration_s=0.4, seed=i) for i, c in enumerate(ALGORITHMS)]
+    specs = [spec_of(controller=c, duration_s=0.4, seed=i) for i, c in enumerate(AXIS_ALGORITHMS)]
     with ThreadPoolExecutor(max_workers=2) as pool:
         threaded = list(pool.map(lambda s: run_compiled(s, fallback=False), specs))
     for spec, b in zip(specs, threaded):
         assert_same(run_compiled(spec, fallback=False), b)
+
+
+@pytest.mark.parametrize("controller", ["pid", "ladrc", "eso_smc", *ANGLE_ONLY_ALGORITHMS])
+def test_rotary_angle_control_compiled(controller):
+    """rotary_control: angle (a 360° step), every angle law, the supervisor on: same bits."""
+    sets = ["rotary_control=angle", "reference.kind=constant", "reference.value=360.0"]
+    if controller == "eso_smc":
+        sets.append("eso_smc.friction_compensation=false")
+    a, b = both(spec_of(axes=("rotary",), controller=controller, sets=sets, duration_s=0.6))
+    assert_same(a, b)
+    assert a.metrics["rotary"].unit == "°"

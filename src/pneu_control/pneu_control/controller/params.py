@@ -46,6 +46,8 @@ from pneu_control.algorithms import (
 
 __all__ = [
     "ALGORITHMS",
+    "ANGLE_ONLY_ALGORITHMS",
+    "AXIS_ALGORITHMS",
     "REFERENCE_KINDS",
     "TdParams",
     "LimitsParams",
@@ -57,6 +59,9 @@ __all__ = [
 ]
 
 ALGORITHMS = ("pid", "ladrc", "eso_smc", "eso_smc_plus", "coast")
+# coast positions a rotary angle only (rotary_control: angle); the others run on every axis
+ANGLE_ONLY_ALGORITHMS = ("coast",)
+AXIS_ALGORITHMS = tuple(a for a in ALGORITHMS if a not in ANGLE_ONLY_ALGORITHMS)
 REFERENCE_KINDS = ("sine", "smooth_step", "constant", "ramp", "waypoints")
 
 _POS = {"lo": 0.0, "lo_open": True}  # strictly positive
