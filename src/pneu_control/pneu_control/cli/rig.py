@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"pneu rig: error: {result.error}", file=sys.stderr)
         return exits.RUNTIME_ERROR
     print(
-        f"cycles {d['cycles']}  late {d['late_cycles']}  missed ticks {d['missed_ticks']}  "
+        f"cycles {d['cycles']}  samples {result.cycles_logged}  late {d['late_cycles']}  missed ticks {d['missed_ticks']}  "
         f"DAQmx late {d['daq_late_errors']} ({d['daq_late_codes'] or '-'})  "
         f"cost p50 {float(d['cost_us_p50']):.0f} us  p99 {float(d['cost_us_p99']):.0f} us  "
         f"heartbeats {d['heartbeats']}"
