@@ -55,7 +55,7 @@ SENSOR_DATA_ROSBAG2 = """- history: keep_last
 
 
 def test_topic_table_is_complete_and_standard():
-    assert len(TOPICS) == 11 == len(TOPIC_BY_NAME)
+    assert len(TOPICS) == 13 == len(TOPIC_BY_NAME)
     for t in TOPICS:
         assert t.name.startswith("/")
         assert t.ros_type in MSG_DEFINITIONS  # common_interfaces types we can write
@@ -67,6 +67,8 @@ def test_topic_table_is_complete_and_standard():
             "controller_state",
             "diagnostics",
             "clock",
+            "trajectory",
+            "task_progress",
         )
     table = markdown_table()
     for t in TOPICS:

@@ -298,8 +298,12 @@ class AxisController:
         params, ref, alg = built
         self._td_was_on = getattr(self, "_td_on", params.td.enabled)
         self._T = params.sample_time_s
+        old = getattr(self, "_params", None)
+        # a reference given by set_reference (a task's, a joint trajectory's) outlives a
+        # change of gains; a change of the reference parameters replaces it
+        if not (getattr(self, "_given_ref", False) and old.reference == params.reference):
+            self._ref, self._next_ref, self._given_ref = ref, None, False
         self._params = params
-        self._ref = ref
         self._alg = alg
         self._td_on = params.td.enabled
         self._neutral = params.limits.u_neutral
@@ -365,17 +369,34 @@ class AxisController:
             )
         self._pending = self._build(params)
 
-    def set_reference(self, ref: Any) -> None:
-        """Follow ``ref`` from the next update on: a callable t -> (r, ṙ, r̈) in SI (m, rad/s
-        or rad), t on this controller's time base (s since its first sample).
+    def set_reference(self, ref: Any, start_s: float | None = None) -> None:
+        """Follow ``ref``: a callable t -> (r, ṙ, r̈) in SI (m, rad/s or rad), t on this
+        controller's time base (s since its first sample).
 
+        From the next update on, or with ``start_s`` from the first update at t >= start_s,
+        the reference followed until then going on (joint_trajectory_controller's rule for
+        a trajectory that starts in the future; a later call replaces one not yet started).
         The algorithm keeps running (no restart, no blending): a new setpoint or
         trajectory, as a task or a joint trajectory gives it. The TD, when on, tracks it
-        from where it is.
+        from where it is. A change of the gains keeps it; one of ``reference.*`` ends it.
         """
         if not callable(ref):
             raise ParamError("reference", type(ref).__name__, "a callable t -> (r, r_dot, r_ddot)")
-        self._ref = ref
+        if start_s is None:
+            self._ref, self._next_ref = ref, None
+        else:
+            self._next_ref = (float(start_s), ref)
+        self._given_ref = True
+
+    @property
+    def t0_ns(self) -> int | None:
+        """The stamp of the first sample since the last reset (t = 0 there), None before it."""
+        return self._t0_ns
+
+    @property
+    def controls(self) -> str:
+        """What the output tracks: ``position`` (linear), ``speed`` or ``angle`` (rotary)."""
+        return self._control
 
     @property
     def time_s(self) -> float:
@@ -413,6 +434,8 @@ class AxisController:
         t = (stamp - self._t0_ns) * 1e-9
         c = self._c
         y_si = measured(c, sample.x, sample.omega, sample.theta)
+        if self._next_ref is not None and t >= self._next_ref[0]:
+            self._ref, self._next_ref = self._next_ref[1], None
         r, rd, rdd = self._ref(t)
         self._t, self._r, self._rd, self._y = t, r, rd, y_si
         self._dirty = True

@@ -69,11 +69,14 @@ __all__ = [
     "TrajectoryPoint",
     "check_limits",
     "from_dict",
+    "from_stamped",
     "insert_then_twist",
     "joint_reference",
+    "ns",
     "references",
     "screw",
     "to_dict",
+    "to_stamped",
     "to_si",
     "twist_while_retracting",
 ]
@@ -263,6 +266,56 @@ def joint_reference(traj: JointTrajectory, joint: str) -> JointReference:
 def references(traj: JointTrajectory) -> dict[str, JointReference]:
     """:func:`joint_reference` of every joint, by name."""
     return {name: joint_reference(traj, name) for name in traj.joint_names}
+
+
+# --- the ROS message's time base -------------------------------------------------------------
+
+
+def to_stamped(traj: JointTrajectory, base_ns: int) -> tuple[int, tuple[str, ...], list]:
+    """``traj`` (times in s on a time base that starts at stamp ``base_ns``) as a message's
+    (header.stamp ns, joint names, points with time_from_start in int ns from that stamp).
+
+    Integer nanoseconds throughout (as a ROS Time and Duration carry them): a trajectory
+    whose times are ``n * 1e-9`` for integers n (:func:`ns`) comes
+    back from :func:`from_stamped` with the same bits.
+    """
+    t0 = ns(traj.t_start)
+    stamp = int(base_ns) + t0
+    pts = [
+        (p.positions, p.velocities, p.accelerations, ns(p.time_from_start) - t0)
+        for p in traj.points
+    ]
+    return stamp, traj.joint_names, pts
+
+
+def from_stamped(
+    stamp_ns: int, joint_names: Sequence[str], points: Sequence[Any], base_ns: int
+) -> JointTrajectory:
+    """A message's trajectory (:func:`to_stamped`'s form) on the time base that starts at
+    stamp ``base_ns``: point times ``(stamp + time_from_start − base) · 1e-9`` s, exact.
+
+    Refused as :class:`JointTrajectory` refuses (one line naming the point and field), and a
+    start before ``base_ns`` (``points[0].time_from_start``: the past cannot be followed).
+    """
+    pts = []
+    for i, (pos, vel, acc, t_ns) in enumerate(points):
+        if t_ns < 0:
+            raise ParamError(f"points[{i}].time_from_start", f"{t_ns} ns", ">= 0 ns")
+        pts.append(
+            TrajectoryPoint(pos, vel, acc, time_from_start=(int(stamp_ns) + t_ns - base_ns) * 1e-9)
+        )
+    if pts and pts[0].time_from_start < 0.0:
+        raise ParamError(
+            "header.stamp",
+            f"{stamp_ns} ns",
+            f">= {base_ns} ns (the first sample this controller took; 0 = its next sample)",
+        )
+    return JointTrajectory(tuple(joint_names), tuple(pts))
+
+
+def ns(t: float) -> int:
+    """A time (s) as the integer nanoseconds a ROS Time or Duration carries (back: ns · 1e-9)."""
+    return int(round(t * 1e9))
 
 
 # --- limits ----------------------------------------------------------------------------------

@@ -16,6 +16,13 @@ both ways (DESIGN §10).
 3. :meth:`ControllerShellCore.answer` -- the valve command (stamped with the
    sample it answers) and, every ``state_every`` ticks, the controller state.
 
+A ``trajectory_msgs/JointTrajectory`` on ``/pneu/joint_trajectory``
+(:meth:`ControllerShellCore.on_trajectory`, as joint_trajectory_controller takes it:
+joint names ``linear``/``rotary``, each controller its own joint; times from
+``header.stamp``, 0 = the next sample) becomes the axis' reference from the next
+sample on (:func:`~pneu_control.controller.trajectory.joint_reference`, the
+in-process task runner's reference, with the same bits: times in integer ns).
+
 Hosted (one-process) deployments call :meth:`update` and :meth:`answer` with
 a whole sample instead of step 1. Same sample, same numbers: a lockstep ROS
 run gives the in-process runner's results.
@@ -31,7 +38,10 @@ from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.contract.topics import JOINT_STATE_TOPIC, PRESSURE_TOPICS
 from pneu_msgs_py.contract.wire import CommandWire, SensorWire, StateWire
 
+from pneu_msgs_py.params.core import ParamError
+
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
+from pneu_control.controller.trajectory import from_stamped, joint_reference
 
 __all__ = ["INPUT_TOPICS", "SampleAssembler", "TickDecoder", "ControllerShellCore"]
 
@@ -145,6 +155,11 @@ class ControllerShellCore:
         self.last_stamp_ns = -1
         self.last_u = _NAN
         self.param_changes = 0
+        self._trajectory: tuple | None = None  # (stamp_ns, names, points) for the next sample
+        self.n_trajectories = 0  # taken (set as the reference)
+        self.n_trajectories_refused = 0
+        self.n_trajectories_late = 0  # started before the sample that took it (joined mid-way)
+        self.trajectory_error = ""
 
     @property
     def params(self) -> Any:
@@ -166,8 +181,50 @@ class ControllerShellCore:
         """One sensor payload in; the rebuilt sample when its tick is complete."""
         return self.decoder.on_raw(topic, data)
 
+    def on_trajectory(self, stamp_ns: int, joint_names: tuple[str, ...], points: list) -> bool:
+        """A JointTrajectory (:func:`pneu_msgs_py.contract.convert.joint_trajectory_from_msg`'s
+        form): True if it names this axis' joint and is valid (it becomes the reference at the
+        next sample, replacing one not yet taken); False if it does not name the joint; raises
+        :class:`ParamError` (one line, counted) if it is refused."""
+        if self.axis not in joint_names:
+            return False
+        try:
+            if self.axis == "rotary" and self.controller.controls != "angle":
+                raise ParamError(
+                    "joint_names", "rotary", "a rotary joint under rotary_control: angle only "
+                    "(this controller controls the speed)",
+                )  # fmt: skip
+            from_stamped(stamp_ns, joint_names, points, stamp_ns)  # the message alone
+        except ParamError as err:
+            self.n_trajectories_refused += 1
+            self.trajectory_error = str(err)
+            raise
+        self._trajectory = (int(stamp_ns), tuple(joint_names), list(points))
+        return True
+
+    def _take_trajectory(self, sample: SensorSample) -> None:
+        """The pending trajectory as the reference, on the controller's time base."""
+        stamp, names, points = self._trajectory
+        self._trajectory = None
+        c = self.controller
+        base = c.t0_ns if c.t0_ns is not None else sample.stamp_ns
+        start = stamp if stamp else sample.stamp_ns  # 0: from this sample on
+        try:
+            traj = from_stamped(start, names, points, base)
+        except ParamError as err:  # stamped before this controller's first sample
+            self.n_trajectories_refused += 1
+            self.trajectory_error = str(err)
+            return
+        if start < sample.stamp_ns:
+            self.n_trajectories_late += 1
+        # the reference followed so far goes on until the trajectory's start (as in process)
+        c.set_reference(joint_reference(traj, self.axis), start_s=traj.t_start)
+        self.n_trajectories += 1
+
     def update(self, sample: SensorSample) -> float:
         """``AxisController.update``; returns the valve command (V)."""
+        if self._trajectory is not None:
+            self._take_trajectory(sample)
         u = self.controller.update(sample)
         self.n_samples += 1
         self.last_stamp_ns = sample.stamp_ns
@@ -204,12 +261,14 @@ class ControllerShellCore:
         """One ``/diagnostics`` status: OK, or WARN when ticks were lost or inputs bad."""
         a = self.assembler
         nonfinite = self.controller.n_nonfinite
-        level = 1 if (a.incomplete or a.late or nonfinite or self.n_bad) else 0
+        refused = self.n_trajectories_refused
+        level = 1 if (a.incomplete or a.late or nonfinite or self.n_bad or refused) else 0
         msg = "running" if self.n_samples else "waiting for samples"
         if level:
             msg = (
                 f"{a.incomplete} incomplete / {a.late} late ticks, {nonfinite} non-finite "
-                f"inputs, {self.n_bad} malformed payloads"
+                f"inputs, {self.n_bad} malformed payloads, {refused} trajectories refused"
+                + (f" (last: {self.trajectory_error})" if refused else "")
             )
         return [
             DiagStatus(
@@ -228,6 +287,9 @@ class ControllerShellCore:
                     "last_stamp_ns": str(self.last_stamp_ns),
                     "last_command_v": f"{self.last_u:.6g}",
                     "parameter_changes": str(self.param_changes),
+                    "trajectories": str(self.n_trajectories),
+                    "trajectories_refused": str(refused),
+                    "trajectories_late": str(self.n_trajectories_late),
                     "input_topics": ",".join(self.topics),
                     "state_every": str(self.state_every),
                 },

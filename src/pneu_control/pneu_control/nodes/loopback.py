@@ -13,7 +13,15 @@ every active axis has answered. The controller states are read back with
 rosbags' Jazzy typestore (an independent decoder). What is recorded is what
 the logger would see on the topics (``tap``).
 
-Same spec and seed -> the in-process runner's numbers (tested); a ROS
+With ``task`` (a :class:`~pneu_control.task.session.PreparedTask`) the task runner
+node's core takes part as it does over ROS: it reads the five sensor payloads first,
+its trajectories (``/pneu/joint_trajectory``, CDR) reach the controllers only after
+they answered that sample (the worst order ROS can deliver them in; the trajectory's
+start :data:`~pneu_control.task.runner.START_DELAY_S` later covers it), its progress
+(``/pneu/task/progress``) goes to the sim's :class:`~pneu_sim.nodes.sim_core.TaskGate`
+(loads, e-stop), the sim's ``/diagnostics`` back to it; the run ends at the task's end.
+
+Same spec and seed -> the in-process runner's numbers (tested), a task's too; a ROS
 lockstep run adds only transport, so it must give them too (the rclpy test
 in ``test/ros`` checks that on a ROS machine).
 """
@@ -27,19 +35,25 @@ from typing import Any
 import numpy as np
 from pneu_msgs_py.contract.convert import (
     controller_state_from_msg,
+    diag_statuses_from_msg,
+    diagnostics_to_typestore,
     fill_diagnostic_array,
+    joint_trajectory_from_msg,
+    joint_trajectory_to_typestore,
     typestore_messages,
 )
 from pneu_msgs_py.contract.topics import (
     CLOCK_TOPIC,
     CONTROLLER_STATE_TOPIC,
     DIAGNOSTICS_TOPIC,
+    TASK_PROGRESS_TOPIC,
     TOPIC_BY_NAME,
+    TRAJECTORY_TOPIC,
     VALVE_COMMAND_TOPIC,
 )
 from pneu_msgs_py.contract.wire import CommandWire, SensorWire, clock_bytes
 from pneu_sim.cycle.rig_cycle import RigCycle
-from pneu_sim.nodes.sim_core import safety_statuses
+from pneu_sim.nodes.sim_core import TaskGate, TaskParams, safety_statuses
 from pneu_sim.physics.plant import Plant
 
 from pneu_control.controller.axis import STATE_FIELDS
@@ -73,6 +87,7 @@ def run_loopback(
     *,
     supervisor: Any | None = None,
     tap: Callable[[str, str, bytes], None] | None = None,
+    task: Any | None = None,
 ) -> RunResult:
     """Run ``spec`` through the shells' per-sample code and CDR (see module docstring).
 
@@ -99,11 +114,17 @@ def run_loopback(
         seed=spec.seed,
     )
     loop = _Lockstep(spec, core, supervisor, tap)
+    if task is not None:
+        from pneu_control.nodes.task_core import TaskShellCore
+
+        loop.task = TaskShellCore(task, lockstep=True)
+        loop.gate = TaskGate(core, TaskParams(wait=True, ends_run=True))
     t_wall = time.perf_counter()
     loop.run(int(round(spec.duration_s / plant.T)))
     wall = time.perf_counter() - t_wall
     result = loop.result(plant.T, wall)
     result.wire = {"messages": loop.messages, "bytes": loop.bytes, **core.counters()}  # type: ignore[attr-defined]
+    result.task = loop.task  # type: ignore[attr-defined]
     return result
 
 
@@ -133,6 +154,8 @@ class _Lockstep:
         self.rec_out: list[tuple[float, float]] = []
         self.events: list[Any] = []
         self.algorithms: dict[str, str] = {}
+        self.task: Any = None  # a TaskShellCore
+        self.gate: TaskGate | None = None
 
     def send(self, topic: str, data: bytes) -> bytes:
         """Publish ``data`` on ``topic``: count it and hand it to the tap."""
@@ -150,20 +173,59 @@ class _Lockstep:
             if self.tap is not None:  # /clock first, as the sim node publishes it (nobody reads it)
                 send(CLOCK_TOPIC, clock_bytes(s.stamp_ns))
             wired = [(topic, send(topic, data)) for topic, data in self.sensors.encode(s)]
+            trajectories = self.task_answers(s, wired) if self.task is not None else []
+            if self.gate is not None and self.gate.ended:
+                break  # the task's end: this sample is not run (as the in-process runner)
             for axis, shell in self.shells.items():
                 for topic, data in wired:  # one publication order; the assembler copes with any
                     if topic in shell.topics:
                         self.answer(axis, shell.step_raw(topic, data))
+            for data in trajectories:  # after the controllers answered: the latest delivery
+                stamp, names, points = joint_trajectory_from_msg(
+                    self.ts.deserialize_cdr(data, "trajectory_msgs/msg/JointTrajectory")
+                )
+                for shell in self.shells.values():
+                    shell.on_trajectory(stamp, names, points)
             self.rec_samples.append(s)
             if not core.complete:
                 raise RuntimeError(f"lockstep: no answer from {core.waiting_for} to sample {s.k}")
             if self.drain is not None:
                 events = self.drain()
                 self.events.extend(events)
-                if events and self.tap is not None:  # the sim node's /diagnostics for them
-                    send(DIAGNOSTICS_TOPIC, _diag_bytes(self.ts, s.stamp_ns, events))
+                if events and (self.tap is not None or self.task is not None):
+                    data = _diag_bytes(self.ts, s.stamp_ns, events)  # the sim node's /diagnostics
+                    send(DIAGNOSTICS_TOPIC, data)
+                    if self.task is not None:
+                        msg = self.ts.deserialize_cdr(data, _DIAG)
+                        self.task.on_diagnostics(diag_statuses_from_msg(msg))
             self.rec_out.append(core.held_pair)
             s = core.advance()
+
+    def task_answers(self, s: Any, wired: list[tuple[str, bytes]]) -> list[bytes]:
+        """The task runner's answer to sample ``s``: its progress to the sim's gate (CDR both
+        ways), its trajectories as CDR (returned: delivered after the controllers answered)."""
+        out = None
+        for topic, data in wired:
+            out = self.task.on_raw(topic, data) or out
+        trajs, progress = out
+        msgs = [
+            self.send(
+                TRAJECTORY_TOPIC,
+                bytes(
+                    self.ts.serialize_cdr(
+                        joint_trajectory_to_typestore(*t), "trajectory_msgs/msg/JointTrajectory"
+                    )
+                ),
+            )
+            for t in trajs
+        ]
+        arr = diagnostics_to_typestore(s.stamp_ns, [p.to_status() for p in progress])
+        data = self.send(TASK_PROGRESS_TOPIC, bytes(self.ts.serialize_cdr(arr, _DIAG)))
+        back = self.ts.deserialize_cdr(data, _DIAG)
+        self.gate.on_progress(s.stamp_ns, diag_statuses_from_msg(back))
+        if not self.gate.complete:
+            raise RuntimeError(f"lockstep: no task progress for sample {s.k}")
+        return msgs
 
     def answer(self, axis: str, out: tuple[bytes, bytes] | None) -> None:
         """A shell's (command, state) payloads, if it answered: offered to the cycle, recorded."""

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 
 from pneu_control.controller.references import SmoothStep
-from pneu_control.controller.trajectory import JointTrajectory, TrajectoryPoint, screw
+from pneu_control.controller.trajectory import JointTrajectory, TrajectoryPoint, ns, screw
 from pneu_control.task.program import DEG_S_PER_RPM, SPIN_RAMP_S, Segment
 
 __all__ = ["KNOT_S", "ns", "segment_trajectory", "spin_profile"]
@@ -30,11 +30,6 @@ __all__ = ["KNOT_S", "ns", "segment_trajectory", "spin_profile"]
 KNOT_S = 0.02  # s between knots: the quintic Hermite matches the profiles to < 1e-4 of Δ
 JOINTS = ("linear", "rotary")
 _TWO_PI = 2.0 * math.pi
-
-
-def ns(t: float) -> int:
-    """A time as the integer nanoseconds a ROS Duration carries (and back: ns * 1e-9)."""
-    return int(round(t * 1e9))
 
 
 def _grid(t0: float, d: float) -> list[float]:

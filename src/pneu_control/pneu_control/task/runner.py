@@ -21,6 +21,7 @@ from typing import Any
 
 from pneu_msgs_py.contract.units import DEG_PER_RAD, MM_PER_M
 
+from pneu_control.controller.trajectory import from_stamped, references, to_stamped
 from pneu_control.task.program import Segment, TaskProgram
 
 __all__ = [
@@ -29,6 +30,7 @@ __all__ = [
     "segment_references",
     "SegmentResult",
     "TaskDriver",
+    "TaskEvent",
     "rod_force",
 ]
 
@@ -66,8 +68,27 @@ class SegmentResult:
         return self.t_end_s - self.t_start_s
 
 
+@dataclass(frozen=True)
+class TaskEvent:
+    """One thing a task decided at a sample (:meth:`TaskDriver.decide`).
+
+    ``kind``: ``start`` (segment ``index`` starts: its ``trajectory`` of both joints and
+    the twin's ``loads``, plant short names), ``reached`` / ``timeout`` (it ended),
+    ``aborted`` (both valves safe: the supervisor's e-stop, ``reason``), ``end`` (the
+    run stops here; the outcome is :attr:`TaskDriver.outcome`).
+    """
+
+    kind: str
+    index: int
+    trajectory: Any = None
+    loads: dict[str, float] = field(default_factory=dict)
+    reason: str = ""
+
+
 class TaskDriver:
-    """Runs ``program`` as the runner's hook (``driver(k, s, cycle, controllers)``)."""
+    """Runs ``program``: :meth:`decide` per sample (ROS-free, no side effects; the task node
+    publishes what it decides), and, in process, the runner's hook
+    (``driver(k, s, cycle, controllers)``) that carries it out on the twin."""
 
     def __init__(self, program: TaskProgram, *, A_c1: float, A_c2: float, p_a: float):
         self.program = program
@@ -82,27 +103,54 @@ class TaskDriver:
 
     # -- the hook ---------------------------------------------------------------
     def __call__(self, k: int, s: Any, cycle: Any, ctrls: dict[str, Any]) -> bool:
-        t = s.stamp_ns * 1e-9  # the controllers' time base: their first sample is stamp 0
-        if self.t_stop is not None:
-            return t >= self.t_stop
         sup = cycle.supervisor
-        if sup is not None and sup.tripped and self.i >= 0:
-            self._abort(t, cycle, "safety: the supervisor took an axis safe")
-            return False
+        # the controllers' time base: their first sample is stamp 0
+        events = self.decide(s.stamp_ns * 1e-9, s, sup is not None and sup.tripped)
+        for e in events:
+            if e.kind == "start":
+                if e.loads and hasattr(cycle.plant, "set_load"):
+                    cycle.plant.set_load(**e.loads)
+                for axis, ref in references(e.trajectory).items():
+                    if axis in ctrls:
+                        ctrls[axis].set_reference(ref, start_s=e.trajectory.t_start)
+            elif e.kind == "aborted" and sup is not None:
+                sup.estop(f"task aborted: {e.reason}")  # both valves safe (5 V)
+        return any(e.kind == "end" for e in events)
+
+    # -- the decisions ----------------------------------------------------------------
+    def decide(self, t: float, s: Any, tripped: bool) -> list[TaskEvent]:
+        """What happens at sample ``s`` (time ``t`` s on the task's time base; ``tripped``:
+        the supervisor holds an axis safe)."""
+        if self.t_stop is not None:  # aborted: the safe tail, then the end
+            if t >= self.t_stop:
+                self.t_stop = math.inf
+                return [TaskEvent("end", self.i)]
+            return []
+        if self.outcome != "running":
+            return []
+        if tripped and self.i >= 0:
+            return self._abort(t, "safety: the supervisor took an axis safe")
         if self.i < 0:
-            self._start(0, t, cycle, ctrls)
-            return False
+            return [self._start(0, t)]
         seg = self.program.segments[self.i]
         if self._done(seg, t, s):
             self._finish(seg, t, s, "reached")
-            return self._next(t, cycle, ctrls)
+            return [TaskEvent("reached", seg.index), *self._next(t)]
         if t - self.t_seg >= seg.timeout_s:
             self._finish(seg, t, s, "timeout")
             if seg.on_timeout == "abort":
-                self._abort(t, cycle, f"{seg.label}: timeout after {seg.timeout_s:g} s")
-                return False
-            return self._next(t, cycle, ctrls)
-        return False
+                return [
+                    TaskEvent("timeout", seg.index),
+                    *self._abort(t, f"{seg.label}: timeout after {seg.timeout_s:g} s"),
+                ]
+            return [TaskEvent("timeout", seg.index), *self._next(t)]
+        return []
+
+    def abort(self, t: float, reason: str) -> list[TaskEvent]:
+        """Abort a running task now (a user's request): both valves safe, the safe tail."""
+        if self.t_stop is not None or self.outcome != "running":
+            return []
+        return self._abort(t, reason)
 
     def interrupted(self, t: float) -> None:
         """The run stopped on a signal: the running segment ends there."""
@@ -113,24 +161,22 @@ class TaskDriver:
                 self.results[self.i].t_end_s = t
 
     # -- segments ---------------------------------------------------------------
-    def _next(self, t: float, cycle: Any, ctrls: dict[str, Any]) -> bool:
+    def _next(self, t: float) -> list[TaskEvent]:
         if self.i + 1 >= len(self.program.segments):
             self.outcome = "completed"
-            return True
-        self._start(self.i + 1, t, cycle, ctrls)
-        return False
+            return [TaskEvent("end", self.i)]
+        return [self._start(self.i + 1, t)]
 
-    def _start(self, i: int, t: float, cycle: Any, ctrls: dict[str, Any]) -> None:
+    def _start(self, i: int, t: float) -> TaskEvent:
+        from pneu_control.task.plan import segment_trajectory
+
         seg = self.program.segments[i]
         self.i, self.t_seg, self.t_settled = i, t, None
         res = self.results[i]
         res.status, res.t_start_s = "running", t
-        if seg.load and hasattr(cycle.plant, "set_load"):
-            cycle.plant.set_load(**_load_kwargs(seg.load))
-        refs = segment_references(seg, t)
-        for axis, ref in refs.items():
-            if axis in ctrls:
-                ctrls[axis].set_reference(ref)
+        # on the integer-ns grid a ROS message carries, so over ROS the bits are the same
+        traj = from_stamped(*to_stamped(segment_trajectory(seg, t + START_DELAY_S), 0), 0)
+        return TaskEvent("start", i, traj, _load_kwargs(seg.load))
 
     def _done(self, seg: Segment, t: float, s: Any) -> bool:
         u = seg.until
@@ -162,14 +208,13 @@ class TaskDriver:
         res.error_mm = (seg.x_end - s.x) * MM_PER_M
         res.error_deg = (seg.theta_end - s.theta) * DEG_PER_RAD
 
-    def _abort(self, t: float, cycle: Any, reason: str) -> None:
+    def _abort(self, t: float, reason: str) -> list[TaskEvent]:
         if 0 <= self.i < len(self.results) and self.results[self.i].status == "running":
             self.results[self.i].status = "aborted"
             self.results[self.i].t_end_s = t
         self.outcome, self.reason = "aborted", reason
-        if cycle.supervisor is not None:
-            cycle.supervisor.estop(f"task aborted: {reason}")  # both valves safe (5 V)
         self.t_stop = t + SAFE_TAIL_S
+        return [TaskEvent("aborted", self.i, reason=reason)]
 
 
 def _load_kwargs(load: dict[str, Any]) -> dict[str, Any]:
@@ -179,7 +224,6 @@ def _load_kwargs(load: dict[str, Any]) -> dict[str, Any]:
 
 def segment_references(seg: Segment, t0: float) -> dict[str, Any]:
     """Each joint's reference (SI: m, rad; t on the controllers' time base) for ``seg``."""
-    from pneu_control.controller.trajectory import references
     from pneu_control.task.plan import segment_trajectory
 
     return dict(references(segment_trajectory(seg, t0 + START_DELAY_S)))

@@ -43,6 +43,15 @@ _BODIES: dict[str, str] = {
     "diagnostic_msgs/DiagnosticArray": (
         "std_msgs/Header header\ndiagnostic_msgs/DiagnosticStatus[] status\n"
     ),
+    "builtin_interfaces/Duration": "int32 sec\nuint32 nanosec\n",
+    "trajectory_msgs/JointTrajectoryPoint": (
+        "float64[] positions\nfloat64[] velocities\nfloat64[] accelerations\n"
+        "float64[] effort\nbuiltin_interfaces/Duration time_from_start\n"
+    ),
+    "trajectory_msgs/JointTrajectory": (
+        "std_msgs/Header header\nstring[] joint_names\n"
+        "trajectory_msgs/JointTrajectoryPoint[] points\n"
+    ),
 }
 
 # Dependencies in depth-first first-use order.
@@ -55,6 +64,9 @@ _DEPS: dict[str, tuple[str, ...]] = {
     "diagnostic_msgs/KeyValue": (),
     "diagnostic_msgs/DiagnosticStatus": ("diagnostic_msgs/KeyValue",),
     "diagnostic_msgs/DiagnosticArray": ("std_msgs/Header", "diagnostic_msgs/DiagnosticStatus"),
+    "builtin_interfaces/Duration": (),
+    "trajectory_msgs/JointTrajectoryPoint": ("builtin_interfaces/Duration",),
+    "trajectory_msgs/JointTrajectory": ("std_msgs/Header", "trajectory_msgs/JointTrajectoryPoint"),
 }
 
 
@@ -100,6 +112,7 @@ MSG_DEFINITIONS: dict[str, str] = {
         "sensor_msgs/msg/JointState",
         "rosgraph_msgs/msg/Clock",
         "diagnostic_msgs/msg/DiagnosticArray",
+        "trajectory_msgs/msg/JointTrajectory",
     )
 }
 
@@ -118,5 +131,8 @@ TYPE_HASHES: dict[str, str] = {
     ),
     "diagnostic_msgs/msg/DiagnosticArray": (
         "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e"
+    ),
+    "trajectory_msgs/msg/JointTrajectory": (
+        "RIHS01_179b33eba59d676f6d967ac71fe35e7ca2f64b2f3928f4a018cec115e213796e"
     ),
 }

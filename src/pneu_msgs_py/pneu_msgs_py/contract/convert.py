@@ -40,6 +40,9 @@ __all__ = [
     "command_from_msg",
     "controller_state_from_msg",
     "diag_statuses_from_msg",
+    "StampedPoint",
+    "fill_joint_trajectory",
+    "joint_trajectory_from_msg",
     "fill_sensor_joint_states",
     "sample_to_values",
     "typestore_messages",
@@ -47,6 +50,7 @@ __all__ = [
     "command_to_typestore",
     "controller_state_to_typestore",
     "diagnostics_to_typestore",
+    "joint_trajectory_to_typestore",
 ]
 
 #: DiagnosticStatus levels (diagnostic_msgs: byte OK=0 WARN=1 ERROR=2 STALE=3).
@@ -276,6 +280,52 @@ def controller_state_from_msg(msg: Any) -> tuple[int, str, dict[str, float]]:
     )
 
 
+#: One ``trajectory_msgs/JointTrajectoryPoint`` as plain data: (positions, velocities,
+#: accelerations, time_from_start in int ns). Effort is not used (pneu's joints are
+#: position-controlled); a message's effort entries are ignored.
+StampedPoint = tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...], int]
+
+
+def fill_joint_trajectory(
+    msg: Any,
+    point_cls: Callable[[], Any],
+    stamp_ns: int,
+    joint_names: Sequence[str],
+    points: Sequence[StampedPoint],
+    array: Callable[[Sequence[float]], Any] = _floats,
+) -> Any:
+    """Fill a ``trajectory_msgs/JointTrajectory``: header.stamp = ``stamp_ns`` (the time the
+    trajectory starts), one point per :data:`StampedPoint` (``point_cls()``: an empty
+    point; ``array`` as :func:`fill_joint_state`'s)."""
+    fill_header(msg.header, stamp_ns)
+    msg.joint_names = list(joint_names)
+    out = []
+    for pos, vel, acc, t_ns in points:
+        pt = point_cls()
+        pt.positions, pt.velocities, pt.accelerations = array(pos), array(vel), array(acc)
+        pt.effort = array(())
+        sec, nsec = divmod(int(t_ns), _NS)
+        pt.time_from_start.sec = sec
+        pt.time_from_start.nanosec = nsec
+        out.append(pt)
+    msg.points = out
+    return msg
+
+
+def joint_trajectory_from_msg(msg: Any) -> tuple[int, tuple[str, ...], list[StampedPoint]]:
+    """(header.stamp ns, joint names, points) of a JointTrajectory (rclpy or rosbags)."""
+    points = [
+        (
+            tuple(float(v) for v in p.positions),
+            tuple(float(v) for v in p.velocities),
+            tuple(float(v) for v in p.accelerations),
+            stamp_to_ns(p.time_from_start),
+        )
+        for p in msg.points
+    ]
+    return stamp_to_ns(msg.header.stamp), tuple(str(n) for n in msg.joint_names), points
+
+
 def diag_statuses_from_msg(msg: Any) -> list[DiagStatus]:
     """:class:`DiagStatus` items from a DiagnosticArray (rclpy or rosbags)."""
     out = []
@@ -339,6 +389,16 @@ def _ts_new(ros_type: str) -> Any:
         return T[ros_type](header=header(stamp=time(sec=0, nanosec=0), frame_id=""), status=[])
     if ros_type == "rosgraph_msgs/msg/Clock":
         return T[ros_type](clock=time(sec=0, nanosec=0))
+    if ros_type == "trajectory_msgs/msg/JointTrajectory":
+        return T[ros_type](
+            header=header(stamp=time(sec=0, nanosec=0), frame_id=""), joint_names=[], points=[]
+        )
+    if ros_type == "trajectory_msgs/msg/JointTrajectoryPoint":
+        e = _np_array(())
+        dur = T["builtin_interfaces/msg/Duration"](sec=0, nanosec=0)
+        return T[ros_type](
+            positions=e, velocities=e, accelerations=e, effort=e, time_from_start=dur
+        )
     raise KeyError(ros_type)
 
 
@@ -368,6 +428,20 @@ def controller_state_to_typestore(
     """A controller state as a rosbags JointState."""
     return fill_controller_state(
         _ts_new("sensor_msgs/msg/JointState"), stamp_ns, fields, values, algorithm, _np_array
+    )
+
+
+def joint_trajectory_to_typestore(
+    stamp_ns: int, joint_names: Sequence[str], points: Sequence[StampedPoint]
+) -> Any:
+    """A JointTrajectory as a rosbags object."""
+    return fill_joint_trajectory(
+        _ts_new("trajectory_msgs/msg/JointTrajectory"),
+        lambda: _ts_new("trajectory_msgs/msg/JointTrajectoryPoint"),
+        stamp_ns,
+        joint_names,
+        points,
+        _np_array,
     )
 
 

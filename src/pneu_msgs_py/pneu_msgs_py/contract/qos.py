@@ -141,6 +141,7 @@ COMMAND_SUB_REALTIME = QosProfile(history="keep_last", depth=1, reliability="bes
 STATE = QosProfile(history="keep_last", depth=100, reliability="reliable")
 DIAGNOSTICS = QosProfile(history="keep_last", depth=10, reliability="reliable")
 CLOCK = QosProfile(history="keep_last", depth=1, reliability="reliable")
+TRAJECTORY = QosProfile(history="keep_last", depth=10, reliability="reliable")  # rclpy's default
 
 
 def offered_qos_yaml(profiles: Iterable[QosProfile]) -> str:

@@ -42,6 +42,9 @@ __all__ = [
     "CONTROLLER_STATE_TOPIC",
     "DIAGNOSTICS_TOPIC",
     "CLOCK_TOPIC",
+    "TRAJECTORY_TOPIC",
+    "TASK_PROGRESS_TOPIC",
+    "TRAJECTORY_JOINTS",
     "DEFAULT_STATE_FIELDS",
     "ROTARY_COUNTS_JOINT",
     "valve_joint",
@@ -84,6 +87,10 @@ CONTROLLER_STATE_TOPIC = {
 }
 DIAGNOSTICS_TOPIC = "/diagnostics"
 CLOCK_TOPIC = "/clock"
+#: ``trajectory_msgs/JointTrajectory`` of both joints, as joint_trajectory_controller takes it
+TRAJECTORY_TOPIC = "/pneu/joint_trajectory"
+TRAJECTORY_JOINTS = ("linear", "rotary")
+TASK_PROGRESS_TOPIC = "/pneu/task/progress"
 
 
 def valve_joint(axis: str) -> str:
@@ -104,7 +111,9 @@ class TopicSpec:
     content: str
     qos_realtime: _q.QosProfile
     qos_lockstep: _q.QosProfile
-    kind: str  # pressure | joint_state | valve_command | controller_state | diagnostics | clock
+    # pressure | joint_state | valve_command | controller_state | diagnostics | clock |
+    # trajectory | task_progress
+    kind: str
     axis: str | None = None
 
 
@@ -202,6 +211,36 @@ TOPICS: tuple[TopicSpec, ...] = (
         _q.DIAGNOSTICS,
         _q.DIAGNOSTICS,
         "diagnostics",
+    ),
+    TopicSpec(
+        TRAJECTORY_TOPIC,
+        "trajectory_msgs/msg/JointTrajectory",
+        "m, rad, s",
+        None,
+        "task runner (or any user)",
+        "controllers, logger",
+        "joint_names ⊆ ['linear', 'rotary'] (a controller takes its own joint); points: "
+        "positions [x, theta], optional velocities and accelerations (one per joint or "
+        "none), time_from_start from header.stamp (0 = the controller's next sample); "
+        "first and last point at rest. Rotary: rotary_control angle only",
+        _q.TRAJECTORY,
+        _q.LOCKSTEP,
+        "trajectory",
+    ),
+    TopicSpec(
+        TASK_PROGRESS_TOPIC,
+        "diagnostic_msgs/msg/DiagnosticArray",
+        "-",
+        None,
+        "task runner",
+        "sim / driver, logger",
+        "one status 'task: NAME', level 0/1 (timeout)/2 (aborted); values event (tick, "
+        "idle, start, reached, timeout, aborted, end), index, segment, outcome, reason, "
+        "load.* (SI); header.stamp = the sample it answers. Lockstep: one per sample "
+        "(the sim waits for it); aborted: the sim / driver e-stop",
+        _q.STATE,
+        _q.LOCKSTEP,
+        "task_progress",
     ),
     TopicSpec(
         CLOCK_TOPIC,

@@ -25,6 +25,8 @@ __all__ = [
     "SimLoop",
     "RealtimeParams",
     "StartupParams",
+    "TaskGate",
+    "TaskParams",
 ]
 
 from pneu_sim.cycle.rig_cycle import MODES
@@ -158,6 +160,70 @@ class StartupParams:
 
 
 @dataclass(frozen=True)
+class TaskParams:
+    wait: bool = param(
+        False,
+        desc="lockstep: also wait for the task runner's progress for every sample before "
+        "advancing (its segments, loads and e-stop then act at the samples they do in process)",
+        read_only=True,
+    )
+    ends_run: bool = param(
+        False,
+        desc="the run ends when the task runner's task ends (its 'end' progress)",
+        read_only=True,
+    )
+
+
+class TaskGate:
+    """The sim's side of a task runner (``/pneu/task/progress``, ROS-free).
+
+    Each progress event is carried out on the cycle: a segment's ``load.*`` values on
+    the twin (from the next step, as the in-process runner sets them), ``aborted`` as
+    the supervisor's e-stop with the in-process wording. ``wait``: the current sample
+    is not :attr:`complete` until the task has answered it (or ended); ``ended``: the
+    task's ``end`` was seen.
+    """
+
+    def __init__(self, cycle: Any, params: TaskParams | None = None) -> None:
+        self.cycle = cycle
+        self.p = params or TaskParams()
+        self.acked = -1
+        self.ended = False
+        self.events = 0
+        self.refused = 0  # progress statuses that were not a task's
+
+    def on_progress(self, stamp_ns: int, statuses: Any) -> list[str]:
+        """One progress message (its statuses); returns a line per status refused."""
+        from pneu_msgs_py.contract.task_progress import TaskProgress
+
+        bad = []
+        for st in statuses:
+            try:
+                ev = TaskProgress.from_status(stamp_ns, st)
+            except ValueError as err:
+                self.refused += 1
+                bad.append(str(err))
+                continue
+            self.events += 1
+            if ev.event == "start" and ev.loads and hasattr(self.cycle.plant, "set_load"):
+                self.cycle.plant.set_load(**ev.loads)
+            elif ev.event == "aborted" and self.cycle.supervisor is not None:
+                self.cycle.supervisor.estop(f"task aborted: {ev.reason}")
+            elif ev.event == "end":
+                self.ended = True
+        s = self.cycle.sample
+        if s is not None and stamp_ns == s.stamp_ns:
+            self.acked = stamp_ns
+        return bad
+
+    @property
+    def complete(self) -> bool:
+        """The current sample needs nothing more from the task."""
+        s = self.cycle.sample
+        return not self.p.wait or self.ended or (s is not None and self.acked == s.stamp_ns)
+
+
+@dataclass(frozen=True)
 class SimNodeParams:
     """Parameters of ``pneu_sim sim_node`` (the plant itself comes from plant.yaml)."""
 
@@ -212,6 +278,7 @@ class SimNodeParams:
     lockstep: LockstepParams = param(LockstepParams)
     realtime: RealtimeParams = param(RealtimeParams)
     startup: StartupParams = param(StartupParams)
+    task: TaskParams = param(TaskParams)
 
 
 class SimLoop:
