@@ -37,7 +37,6 @@ from pneu_msgs_py.contract.convert import DiagStatus
 from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.contract.topics import JOINT_STATE_TOPIC, PRESSURE_TOPICS
 from pneu_msgs_py.contract.wire import CommandWire, SensorWire, StateWire
-
 from pneu_msgs_py.params.core import ParamError
 
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
