@@ -13,6 +13,7 @@ data_files = [
         os.path.join("share", PACKAGE, "config", "layouts"),
         sorted(glob("config/layouts/*.json") + glob("config/layouts/*.xml")),
     ),
+    (os.path.join("share", PACKAGE, "config", "tasks"), sorted(glob("config/tasks/*.yaml"))),
     (os.path.join("share", PACKAGE, "launch"), sorted(glob("launch/*.launch.py"))),
 ]
 
@@ -53,6 +54,7 @@ setup(
             "controller_manager = pneu_control.nodes.controller_manager:main",
             "bench_ros = pneu_control.bench.ros_graph:main",
             "exciter = pneu_control.nodes.exciter_node:main",
+            "task_runner = pneu_control.nodes.task_node:main",
         ],
     },
 )

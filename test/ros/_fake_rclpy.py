@@ -68,7 +68,9 @@ class World:
                 v = getattr(m, f)
                 if hasattr(v, "_type"):
                     v = conv(v, v._type)
-                elif f in ("position", "velocity", "effort"):
+                elif f in (
+                    "position", "velocity", "effort", "positions", "velocities", "accelerations"
+                ):  # fmt: skip
                     v = np.array(v, dtype=np.float64)
                 elif isinstance(v, list) and v and hasattr(v[0], "_type"):
                     v = [conv(x, x._type) for x in v]
@@ -124,6 +126,21 @@ DiagnosticStatus = _msg(
 )
 DiagnosticArray = _msg("diagnostic_msgs/msg/DiagnosticArray", {"header": Header, "status": list})
 ClockMsg = _msg("rosgraph_msgs/msg/Clock", {"clock": Time})
+Duration = _msg("builtin_interfaces/msg/Duration", {"sec": 0, "nanosec": 0})
+JointTrajectoryPoint = _msg(
+    "trajectory_msgs/msg/JointTrajectoryPoint",
+    {
+        "positions": _darr,
+        "velocities": _darr,
+        "accelerations": _darr,
+        "effort": _darr,
+        "time_from_start": Duration,
+    },
+)
+JointTrajectory = _msg(
+    "trajectory_msgs/msg/JointTrajectory",
+    {"header": Header, "joint_names": list, "points": list},
+)
 FloatingPointRange = _msg(
     "rcl_interfaces/msg/FloatingPointRange", {"from_value": 0.0, "to_value": 0.0, "step": 0.0}
 )
@@ -568,6 +585,12 @@ def _modules() -> dict[str, types.ModuleType]:
             DiagnosticStatus=DiagnosticStatus,
             KeyValue=KeyValue,
         ),
+        "trajectory_msgs": mod("trajectory_msgs"),
+        "trajectory_msgs.msg": mod(
+            "trajectory_msgs.msg",
+            JointTrajectory=JointTrajectory,
+            JointTrajectoryPoint=JointTrajectoryPoint,
+        ),
         "rosgraph_msgs": mod("rosgraph_msgs"),
         "rosgraph_msgs.msg": mod("rosgraph_msgs.msg", Clock=ClockMsg),
         "std_srvs": mod("std_srvs"),
@@ -589,6 +612,7 @@ NODE_MODULES = (
     "pneu_control.nodes.controller_node",
     "pneu_control.nodes.logger_node",
     "pneu_driver.nodes.driver_node",
+    "pneu_control.nodes.task_node",
 )
 
 

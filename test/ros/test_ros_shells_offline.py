@@ -320,3 +320,97 @@ def test_run_node_refuses_an_executor_it_cannot_give_in_one_line(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("sim_node: error: " + message)
     assert shut == [True]  # the node was built: it is still left safe
+
+
+def test_a_task_through_the_node_modules_equals_pneu_task(world, tmp_path):
+    """Task runner, sim, both controllers and the logger over the stand-in: the task's
+    segments end at the same samples, the bag's joints and commands are the in-process
+    run's (to the sample the task ended), the report is written."""
+    import numpy as np
+    from pneu_control.task.session import execute_task, prepare
+    from pneu_msgs_py.bag.reader import read_run
+    from pneu_msgs_py.params.paths import config_file
+    from pneu_msgs_py.params.ros import values_to_overrides
+
+    task = config_file("tasks/coupling_insert_lock.yaml")
+    prepared = prepare(task)
+    plant = tmp_path / "task_plant.yaml"
+    from pneu_sim.physics.plant_file import dump_plant_yaml
+
+    plant.write_text(dump_plant_yaml(prepared.spec.plant))
+    import yaml
+    from pneu_msgs_py.params.core import to_dict
+
+    safety = tmp_path / "task_safety.yaml"  # what task.launch.py writes
+    safety.write_text(yaml.safe_dump(to_dict(prepared.spec.safety), sort_keys=False))
+    ros_out = tmp_path / "ros"
+    world.overrides.update(
+        {
+            "/pneu_sim": {
+                "mode": "lockstep",
+                "axes": "both",
+                "duration_s": prepared.spec.duration_s,
+                "plant_file": str(plant),
+                "safety_file": str(safety),
+                "task.wait": True,
+                "task.ends_run": True,
+                "startup.min_subscribers": 1,
+                "startup.settle_s": 0.0,
+            },
+            **{
+                f"/{axis}_controller": {
+                    **values_to_overrides(prepared.spec.controllers[axis]),
+                    "mode": "lockstep",
+                    "use_sim_time": True,
+                }
+                for axis in ("linear", "rotary")
+            },
+            "/task_runner": {"task_file": str(task), "mode": "lockstep", "out": str(ros_out)},
+            "/logger": {"out": str(ros_out), "mode": "lockstep", "use_sim_time": True},
+        }
+    )
+    from pneu_control.nodes.controller_node import ControllerNode
+    from pneu_control.nodes.logger_node import LoggerNode
+    from pneu_control.nodes.task_node import TaskRunnerNode
+    from pneu_sim.nodes.sim_node import SimNode
+    from rclpy.executors import SingleThreadedExecutor
+
+    logger = LoggerNode()
+    nodes = [logger, ControllerNode("linear"), ControllerNode("rotary"), TaskRunnerNode()]
+    sim = SimNode()
+    ex = SingleThreadedExecutor()
+    for n in (*nodes, sim):
+        ex.add_node(n)
+    ex.spin_until_future_complete(sim.done, timeout_sec=300.0)
+    counters = sim.done.result()
+    assert counters["timeouts.linear"] == counters["timeouts.rotary"] == 0
+    _spin_until(ex, lambda: not world.queue and nodes[3].done.done())
+    logger.core.close()
+
+    driver, result, rep = execute_task(prepare(task), tmp_path / "inproc")
+    ros_rep = __import__("json").loads((ros_out / "task_report.json").read_text())
+    assert ros_rep["outcome"] == rep["outcome"] == "completed", (
+        ros_rep["reason"],
+        ros_rep["safety_events"],
+    )
+    for a, b in zip(ros_rep["segments"], rep["segments"]):
+        assert (a["status"], a["t_start_s"], a["t_end_s"]) == (
+            b["status"],
+            b["t_start_s"],
+            b["t_end_s"],
+        )
+        assert a["error_mm"] == b["error_mm"] and a["error_deg"] == b["error_deg"]
+    run = read_run(ros_out / "run.mcap")
+    m = len(result.t)  # the in-process run stops before the sample the task ended at
+    assert np.array_equal(run["/pneu/linear/joint_state"]["position"][:m], result.samples["x"])
+    assert np.array_equal(run["/pneu/rotary/joint_state"]["rotary"][:m], result.samples["theta"])
+    for axis in ("linear", "rotary"):
+        got = run[f"/pneu/{axis}/valve_command"]["effort"][:m]
+        assert np.array_equal(got, result.axes[axis]["u"])
+    from mcap_ros2.reader import read_ros2_messages  # an independent reader of the new topics
+
+    per_topic = {}
+    for m_ in read_ros2_messages(str(ros_out / "run.mcap")):
+        per_topic[m_.channel.topic] = per_topic.get(m_.channel.topic, 0) + 1
+    assert per_topic["/pneu/joint_trajectory"] == len(prepared.program.segments)
+    assert per_topic["/pneu/task/progress"] >= m  # one answer per sample

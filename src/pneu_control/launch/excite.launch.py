@@ -17,9 +17,8 @@ design in its metadata. On the twin the sim stops after the design (``duration``
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import Shutdown
 from launch_ros.actions import Node
-from pneu_msgs_py.nodes.launch_graph import AXES_OF, launch_description
+from pneu_msgs_py.nodes.launch_graph import AXES_OF, io_node, launch_description, logger_node
 
 ARGS = [
     ("target", "sim", "sim (the twin, sim node) or rig (the driver)", ["sim", "rig"]),
@@ -61,64 +60,36 @@ def _setup(arg: dict[str, str]) -> list:
             }
         ],
     )
-    logger = Node(
-        package="pneu_control",
-        executable="logger",
-        name="logger",
-        output="screen",
-        parameters=[
-            {
-                "out": arg["out"],
-                "mode": mode,
-                "use_sim_time": lockstep,
-                "recorder": "pneu",
-                "bag_name": "run.mcap",
-            }
-        ],
-        sigterm_timeout="15",  # the run's metadata is written at shutdown
-    )
+    logger = logger_node(arg["out"], mode)
     return [driver, exciter, logger]
 
 
 def _driver(arg: dict[str, str], config: str, mode: str, duration: float):
     """The node on the I/O side: the twin (target sim, ending the launch after ``duration``)
     or the rig's driver."""
+    common = {
+        "safety_file": os.path.join(config, "safety.yaml"),
+        "axes": arg["axes"],
+    }
     if arg["target"] == "sim":
-        return Node(
-            package="pneu_sim",
-            executable="sim_node",
-            name="pneu_sim",
-            output="screen",
-            parameters=[
-                {
-                    "mode": mode,
-                    "axes": arg["axes"],
-                    "duration_s": float(duration),
-                    "seed": int(arg["seed"]),
-                    "safety": True,
-                    "plant_file": arg["plant_file"] or os.path.join(config, "plant.yaml"),
-                    "safety_file": os.path.join(config, "safety.yaml"),
-                    # before sample 0: every sensor topic matched (the exciter and the
-                    # logger take all five) and the logger holding every node's parameters
-                    "startup.min_subscribers": 2,
-                    "startup.wait_for_logger": True,
-                }
-            ],
-            on_exit=[Shutdown(reason="excitation finished")],
-        )
-    return Node(
-        package="pneu_driver",
-        executable="driver_node",
-        name="pneu_driver",
-        output="screen",
-        parameters=[
+        return io_node(
+            "sim",
             {
-                "rig_file": arg["rig_file"] or os.path.join(config, "rig.yaml"),
-                "safety_file": os.path.join(config, "safety.yaml"),
-                "axes": arg["axes"],
-            }
-        ],
-        on_exit=[Shutdown(reason="driver stopped")],
+                **common,
+                "mode": mode,
+                "duration_s": float(duration),
+                "seed": int(arg["seed"]),
+                "safety": True,
+                "plant_file": arg["plant_file"] or os.path.join(config, "plant.yaml"),
+                # before sample 0: every sensor topic matched (the exciter and the
+                # logger take all five) and the logger holding every node's parameters
+                "startup.min_subscribers": 2,
+                "startup.wait_for_logger": True,
+            },
+            "excitation finished",
+        )
+    return io_node(
+        "rig", {**common, "rig_file": arg["rig_file"] or os.path.join(config, "rig.yaml")}
     )
 
 

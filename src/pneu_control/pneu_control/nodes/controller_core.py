@@ -31,6 +31,7 @@ run gives the in-process runner's results.
 from __future__ import annotations
 
 import math
+import threading
 from typing import Any
 
 from pneu_msgs_py.contract.convert import DiagStatus
@@ -155,6 +156,7 @@ class ControllerShellCore:
         self.last_u = _NAN
         self.param_changes = 0
         self._trajectory: tuple | None = None  # (stamp_ns, names, points) for the next sample
+        self._traj_lock = threading.Lock()
         self.n_trajectories = 0  # taken (set as the reference)
         self.n_trajectories_refused = 0
         self.n_trajectories_late = 0  # started before the sample that took it (joined mid-way)
@@ -198,13 +200,17 @@ class ControllerShellCore:
             self.n_trajectories_refused += 1
             self.trajectory_error = str(err)
             raise
-        self._trajectory = (int(stamp_ns), tuple(joint_names), list(points))
+        with self._traj_lock:  # hosted: the loop's thread takes it
+            self._trajectory = (int(stamp_ns), tuple(joint_names), list(points))
         return True
 
     def _take_trajectory(self, sample: SensorSample) -> None:
         """The pending trajectory as the reference, on the controller's time base."""
-        stamp, names, points = self._trajectory
-        self._trajectory = None
+        with self._traj_lock:
+            pending, self._trajectory = self._trajectory, None
+        if pending is None:
+            return
+        stamp, names, points = pending
         c = self.controller
         base = c.t0_ns if c.t0_ns is not None else sample.stamp_ns
         start = stamp if stamp else sample.stamp_ns  # 0: from this sample on

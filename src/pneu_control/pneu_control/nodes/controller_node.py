@@ -4,7 +4,10 @@ Event-driven: raw (CDR bytes) subscriptions to the axis' input topics only
 feed :class:`~pneu_control.nodes.controller_core.ControllerShellCore`, which
 computes when a tick is complete; the command (stamped with the sample it
 answers) is published from that callback as pre-serialised bytes -- no timer
-in the loop, no message conversion. The controller state follows every
+in the loop, no message conversion. ``/pneu/joint_trajectory``
+(``trajectory_msgs/JointTrajectory``, joint names ``linear``/``rotary``, as
+joint_trajectory_controller takes it) sets the axis' reference from the next
+sample on; a refused one is logged in one line and counted in ``/diagnostics``. The controller state follows every
 ``state_every`` ticks (parameter ``state_rate_hz``: every tick in lockstep,
 100 Hz in realtime by default). Every field of :class:`AxisControllerParams`
 is a parameter with a descriptor (description, range, read-only); defaults
@@ -23,12 +26,13 @@ from __future__ import annotations
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from pneu_msgs_py.contract.convert import fill_diagnostic_array
+from pneu_msgs_py.contract.convert import fill_diagnostic_array, joint_trajectory_from_msg
 from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
 from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.contract.topics import (
     CONTROLLER_STATE_TOPIC,
     DIAGNOSTICS_TOPIC,
+    TRAJECTORY_TOPIC,
     VALVE_COMMAND_TOPIC,
     qos_for,
     sub_qos_for,
@@ -47,6 +51,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import FluidPressure, JointState
+from trajectory_msgs.msg import JointTrajectory
 
 from pneu_control.controller.axis import AxisController
 from pneu_control.controller.params import load_controller_params
@@ -145,6 +150,14 @@ class ControllerNode(ShellDefaults, Node):
         self.diag_pub = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
         )
+        # a trajectory of both joints (the task runner's, or anyone's): this axis' joint from
+        # the next sample on; a low-rate message, converted by rclpy
+        self.create_subscription(
+            JointTrajectory,
+            TRAJECTORY_TOPIC,
+            self._on_trajectory,
+            to_rclpy(sub_qos_for(TRAJECTORY_TOPIC, mode), rq),
+        )
         for topic in () if hosted else self.core.topics:
             # raw=True: the callback gets the CDR bytes; one argument (rclpy 7.1.9's
             # EventsExecutor fails on callbacks that also take a MessageInfo)
@@ -163,6 +176,13 @@ class ControllerNode(ShellDefaults, Node):
             self.cmd_pub.publish(out[0])
             if out[1] is not None:
                 self.state_pub.publish(out[1])
+
+    def _on_trajectory(self, msg) -> None:
+        try:
+            if self.core.on_trajectory(*joint_trajectory_from_msg(msg)):
+                self.get_logger().info(f"{self.axis}: trajectory of {len(msg.points)} points taken")
+        except ParamError as err:
+            self.get_logger().warning(f"{self.axis}: trajectory refused: {err}")
 
     def compute(self, s: SensorSample) -> float:
         """Hosted mode: the host's loop hands over sample ``s``; returns u (V) and publishes

@@ -29,6 +29,7 @@ from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import FluidPressure, JointState
+from trajectory_msgs.msg import JointTrajectory
 
 from pneu_control.nodes.logger_core import LOGGED_TOPICS, SIDECAR, LoggerCore
 
@@ -37,6 +38,7 @@ _TYPES = {
     "sensor_msgs/msg/JointState": JointState,
     "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray,
     "rosgraph_msgs/msg/Clock": ClockMsg,
+    "trajectory_msgs/msg/JointTrajectory": JointTrajectory,
 }
 
 

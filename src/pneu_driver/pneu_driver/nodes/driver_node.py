@@ -20,12 +20,18 @@ import sys
 import threading
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from pneu_msgs_py.contract.convert import DiagStatus, fill_diagnostic_array
+from pneu_msgs_py.contract.convert import (
+    DiagStatus,
+    diag_statuses_from_msg,
+    fill_diagnostic_array,
+    stamp_to_ns,
+)
 from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
 from pneu_msgs_py.contract.samples import AXES
 from pneu_msgs_py.contract.topics import (
     DIAGNOSTICS_TOPIC,
     PRESSURE_TOPICS,
+    TASK_PROGRESS_TOPIC,
     VALVE_COMMAND_TOPIC,
     qos_for,
     sub_qos_for,
@@ -93,6 +99,13 @@ class DriverNode(ShellDefaults, Node):
                 to_rclpy(sub_qos_for(VALVE_COMMAND_TOPIC[a], "realtime"), rq),
                 raw=True,
             )
+        # a task runner's abort latches the e-stop (loads are the twin's business)
+        self.create_subscription(
+            DiagnosticArray,
+            TASK_PROGRESS_TOPIC,
+            self._on_task_progress,
+            to_rclpy(qos_for(TASK_PROGRESS_TOPIC, "realtime"), rq),
+        )
         self.create_service(Trigger, "~/estop", self._on_estop)
         self.create_service(Trigger, "~/reset", self._on_reset)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -230,6 +243,20 @@ class DriverNode(ShellDefaults, Node):
             )
             return
         self.loop.put_command(axis, u, stamp_ns)
+
+    def _on_task_progress(self, msg) -> None:
+        from pneu_msgs_py.contract.task_progress import TaskProgress
+
+        stamp = stamp_to_ns(msg.header.stamp)
+        for st in diag_statuses_from_msg(msg):
+            try:
+                ev = TaskProgress.from_status(stamp, st)
+            except ValueError as err:
+                self.get_logger().warning(str(err), throttle_duration_sec=1.0)
+                continue
+            if ev.event == "aborted":
+                self.loop.estop(f"task aborted: {ev.reason}")
+                self.get_logger().error(f"task {ev.task} aborted ({ev.reason}): e-stop latched")
 
     def _on_estop(self, request, response):
         self.loop.estop("service ~/estop")

@@ -35,7 +35,9 @@ __all__ = [
     "rosbag2_qos_overrides",
     "rosbag2_recorder",
     "launch_arguments",
+    "io_node",
     "launch_description",
+    "logger_node",
     "reference_overrides",
 ]
 
@@ -172,26 +174,49 @@ def controller_and_logger_nodes(
             )
     if recorder == "rosbag2":
         nodes.append(rosbag2_recorder(out, mode))
-    nodes.append(
-        Node(
-            package="pneu_control",
-            executable="logger",
-            name="logger",
-            output="screen",
-            parameters=[
-                {
-                    "out": out,
-                    "mode": mode,
-                    "use_sim_time": mode == "lockstep",
-                    "recorder": recorder,
-                    "bag_name": "bag" if recorder == "rosbag2" else "run.mcap",
-                    **common_parameters(arg),
-                }
-            ],
-            sigterm_timeout="15",  # the run's metadata is written at shutdown
-        )
-    )
+    nodes.append(logger_node(out, mode, recorder, common_parameters(arg)))
     return nodes
+
+
+def io_node(target: str, params: dict[str, Any], finished: str = "driver stopped") -> Any:
+    """The node on the I/O side, its exit ending the launch: the twin (``target`` sim, the
+    ``pneu_sim`` sim node; ``finished`` says why it ended) or the rig (the driver node)."""
+    from launch.actions import Shutdown
+    from launch_ros.actions import Node
+
+    sim = target == "sim"
+    return Node(
+        package="pneu_sim" if sim else "pneu_driver",
+        executable="sim_node" if sim else "driver_node",
+        name="pneu_sim" if sim else "pneu_driver",
+        output="screen",
+        parameters=[params],
+        on_exit=[Shutdown(reason=finished if sim else "driver stopped")],
+    )
+
+
+def logger_node(out: str, mode: str, recorder: str = "pneu", extra: dict | None = None) -> Any:
+    """The logger node: ``<out>/run.mcap`` (recorder pneu) or the run metadata beside
+    rosbag2's ``<out>/bag``."""
+    from launch_ros.actions import Node
+
+    return Node(
+        package="pneu_control",
+        executable="logger",
+        name="logger",
+        output="screen",
+        parameters=[
+            {
+                "out": out,
+                "mode": mode,
+                "use_sim_time": mode == "lockstep",
+                "recorder": recorder,
+                "bag_name": "bag" if recorder == "rosbag2" else "run.mcap",
+                **(extra or {}),
+            }
+        ],
+        sigterm_timeout="15",  # the run's metadata is written at shutdown
+    )
 
 
 def hosted_manager(

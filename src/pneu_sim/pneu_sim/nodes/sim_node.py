@@ -30,12 +30,18 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from pneu_driver.safety import SafetySupervisor, load_safety_params
-from pneu_msgs_py.contract.convert import DiagStatus, fill_diagnostic_array
+from pneu_msgs_py.contract.convert import (
+    DiagStatus,
+    diag_statuses_from_msg,
+    fill_diagnostic_array,
+    stamp_to_ns,
+)
 from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
 from pneu_msgs_py.contract.topics import (
     CLOCK_TOPIC,
     DIAGNOSTICS_TOPIC,
     PRESSURE_TOPICS,
+    TASK_PROGRESS_TOPIC,
     VALVE_COMMAND_TOPIC,
     qos_for,
     sub_qos_for,
@@ -61,6 +67,7 @@ from pneu_sim.cycle.rig_cycle import RigCycle
 from pneu_sim.nodes.sim_core import (
     SimLoop,
     SimNodeParams,
+    TaskGate,
     active_axes,
     load_faults,
     safety_statuses,
@@ -130,6 +137,14 @@ class SimNode(ShellDefaults, Node):
         ]
         self.diag_pub = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
+        )
+        # a task runner's progress: loads, e-stop; with task.wait part of the lockstep
+        self.gate = TaskGate(self.core, p.task)
+        self.task_sub = self.create_subscription(
+            DiagnosticArray,
+            TASK_PROGRESS_TOPIC,
+            self._on_task_progress,
+            to_rclpy(qos_for(TASK_PROGRESS_TOPIC, p.mode), rq),
         )
         self.create_service(Trigger, "~/estop", self._on_estop)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -221,7 +236,7 @@ class SimNode(ShellDefaults, Node):
         if self.halted or self.done.done():
             return
         self._publish_safety_events(self._drain(), self.core.sample.stamp_ns)
-        if self.n_end and self.core.sample.k + 1 >= self.n_end:
+        if (self.n_end and self.core.sample.k + 1 >= self.n_end) or self._task_ended():
             self._finish()
             return
         self._publish_sample(self.core.advance())
@@ -243,14 +258,31 @@ class SimNode(ShellDefaults, Node):
             self.loop.offer(axis, stamp_ns, u)
             return
         self.core.offer(axis, stamp_ns, u)
-        if self.core.complete:
+        if self.core.complete and self.gate.complete:
             self._advance()
+
+    def _on_task_progress(self, msg) -> None:
+        """The task runner's progress: carried out on the cycle (under the realtime loop's
+        lock); in lockstep its answer to the current sample may complete the cycle."""
+        with self._locked():
+            bad = self.gate.on_progress(stamp_to_ns(msg.header.stamp), diag_statuses_from_msg(msg))
+        for line in bad:
+            self.get_logger().warning(line, throttle_duration_sec=1.0)
+        if self.lockstep and self.started and self.core.complete and self.gate.complete:
+            self._advance()
+        elif self.loop is not None and self._task_ended():
+            self.loop.stop_event.set()
+
+    def _task_ended(self) -> bool:
+        return self.p.task.ends_run and self.gate.ended
 
     def _ready(self) -> bool:
         sp = self.p.startup
         ok = all(pub.get_subscription_count() >= sp.min_subscribers for pub in self.pubs.values())
         if sp.wait_for_logger:  # the logger is the one node listening to parameter events
             ok = ok and self.count_subscribers("/parameter_events") >= 1
+        if self.p.task.wait or self.p.task.ends_run:
+            ok = ok and self.task_sub.get_publisher_count() >= 1
         return ok and all(sub.get_publisher_count() >= 1 for sub in self.cmd_subs)
 
     def _watch(self) -> None:
@@ -275,9 +307,10 @@ class SimNode(ShellDefaults, Node):
                     break
                 self._advance()
         elif now - self.t_published > self.p.lockstep.timeout_s and not self.done.done():
+            waiting = (*self.core.waiting_for, *(() if self.gate.complete else ("task",)))
             self.get_logger().warning(
                 f"lockstep timeout at sample {self.core.sample.k}: no answer from "
-                f"{', '.join(self.core.waiting_for)}",
+                f"{', '.join(waiting)}",
                 throttle_duration_sec=1.0,
             )
             self._advance()
