@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import json
 import math
 from pathlib import Path
 
@@ -387,8 +388,8 @@ def test_a_task_through_the_node_modules_equals_pneu_task(world, tmp_path):
     _spin_until(ex, lambda: not world.queue and nodes[3].done.done())
     logger.core.close()
 
-    driver, result, rep = execute_task(prepare(task), tmp_path / "inproc")
-    ros_rep = __import__("json").loads((ros_out / "task_report.json").read_text())
+    _, result, rep = execute_task(prepare(task), tmp_path / "inproc")
+    ros_rep = json.loads((ros_out / "task_report.json").read_text())
     assert ros_rep["outcome"] == rep["outcome"] == "completed", (
         ros_rep["reason"],
         ros_rep["safety_events"],
