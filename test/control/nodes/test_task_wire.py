@@ -8,17 +8,6 @@ import math
 
 import numpy as np
 import pytest
-from pneu_msgs_py.contract.convert import (
-    DiagStatus,
-    joint_trajectory_from_msg,
-    joint_trajectory_to_typestore,
-    typestore_messages,
-)
-from pneu_msgs_py.contract.samples import SensorSample
-from pneu_msgs_py.contract.task_progress import TaskProgress
-from pneu_msgs_py.params.core import ParamError
-from pneu_msgs_py.params.paths import config_file
-
 from pneu_control.controller.params import load_controller_params
 from pneu_control.controller.trajectory import (
     JointTrajectory,
@@ -32,6 +21,16 @@ from pneu_control.nodes.controller_core import ControllerShellCore
 from pneu_control.nodes.loopback import run_loopback
 from pneu_control.task.runner import TaskDriver
 from pneu_control.task.session import prepare
+from pneu_msgs_py.contract.convert import (
+    DiagStatus,
+    joint_trajectory_from_msg,
+    joint_trajectory_to_typestore,
+    typestore_messages,
+)
+from pneu_msgs_py.contract.samples import SensorSample
+from pneu_msgs_py.contract.task_progress import TaskProgress
+from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.paths import config_file
 
 T_NS = 1_000_000
 
@@ -104,7 +103,7 @@ def test_the_controller_follows_its_joint_of_a_trajectory_from_its_start_on():
 def test_stamp_zero_starts_at_the_next_sample_and_a_late_one_is_joined_midway():
     core = _core("linear")
     core.update(_sample(0))
-    stamp, names, pts = to_stamped(_move(0.02, 0.1), 0)
+    _stamp, names, pts = to_stamped(_move(0.02, 0.1), 0)
     core.on_trajectory(0, names, pts)  # header.stamp 0: joint_trajectory_controller's "now"
     core.update(_sample(1))
     assert core.controller.state_values()[1] == 0.0  # its first point, at rest
