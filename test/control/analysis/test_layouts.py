@@ -29,6 +29,15 @@ PLOTJUGGLER = sorted(LAYOUTS.glob("plotjuggler_*.xml"))
 PANEL_TYPES = {"Plot", "DiagnosticSummary", "DiagnosticStatusPanel", "Tab"}
 # what the issue asks each layout to show, per axis: controller-state names + topics
 WANTED_STATE = ("reference", "error", "u_raw", "z1", "z2", "z3", "s")
+AXIS_OF = {"linear": "linear", "rotary": "rotary", "angle": "rotary"}  # a view's axis
+# what each kind plots of the joints: (topic, joint, field)
+JOINTS_SHOWN = {
+    "linear": {("linear", "position")},
+    "rotary": {("rotary", "velocity")},
+    "both": {("linear", "position"), ("rotary", "velocity")},
+    "angle": {("rotary", "position")},
+    "task": {("linear", "position"), ("rotary", "position")},
+}
 
 
 @pytest.fixture(scope="module")
@@ -129,25 +138,26 @@ def test_foxglove_layout_resolves_in_a_pneu_run_bag(path, bag_messages):
                 seen.add((topic, field))
             assert isinstance(value, float)
     kind = path.stem.split("_", 1)[1]
-    for axis in KINDS[kind]:
+    for axis in (AXIS_OF[v] for v in KINDS[kind]):
         for name in WANTED_STATE:
             assert (f"/pneu/{axis}/controller_state", name) in seen, (axis, name)
         assert (f"/pneu/{axis}/valve_command", f"{axis}_valve") in seen
     pressures = {t for t, f in seen if t.startswith("/pneu/pressure/")}
-    assert (
-        pressures
-        == {
-            "linear": {"/pneu/pressure/cylinder_1", "/pneu/pressure/cylinder_2"},
-            "rotary": {"/pneu/pressure/motor_in"},
-            "both": {
-                "/pneu/pressure/cylinder_1",
-                "/pneu/pressure/cylinder_2",
-                "/pneu/pressure/motor_in",
-            },
-        }[kind]
-    )
-    assert ("/pneu/linear/joint_state", "linear") in seen or kind == "rotary"
-    assert ("/pneu/rotary/joint_state", "rotary") in seen or kind == "linear"
+    cyl = {"/pneu/pressure/cylinder_1", "/pneu/pressure/cylinder_2"}
+    motor = {"/pneu/pressure/motor_in"}
+    want = {
+        "linear": cyl,
+        "rotary": motor,
+        "both": cyl | motor,
+        "angle": motor,
+        "task": cyl | motor,
+    }
+    assert pressures == want[kind]
+    joints = {(j, p["value"].split(".")[1].split("[")[0]) for j in ("linear", "rotary") for p in [
+        q for pid in shown if pid.startswith("Plot!") for q in doc["configById"][pid]["paths"]
+        if q["value"].startswith(f"/pneu/{j}/joint_state.")
+    ]}  # fmt: skip
+    assert joints == JOINTS_SHOWN[kind]
     assert ("/diagnostics", "status") in seen
 
 
@@ -204,9 +214,14 @@ def test_plotjuggler_layout_resolves_in_a_pneu_run_bag(path, bag_messages):
                 assert name in series, f"{path.name}: no series {name} in the bag"
                 assert re.fullmatch(r"#[0-9a-f]{6}", curve.get("color"))
                 named.add(name)
-    for axis in KINDS[kind]:
+    for axis in (AXIS_OF[v] for v in KINDS[kind]):
         for name in WANTED_STATE:
             assert f"/pneu/{axis}/controller_state/{name}/position" in named
         assert f"/pneu/{axis}/valve_command/{axis}_valve/effort" in named
-    assert ("/pneu/linear/joint_state/linear/position" in named) == (kind != "rotary")
-    assert ("/pneu/rotary/joint_state/rotary/velocity" in named) == (kind != "linear")
+    shown = {
+        (j, f)
+        for j in ("linear", "rotary")
+        for f in ("position", "velocity")
+        if f"/pneu/{j}/joint_state/{j}/{f}" in named
+    }
+    assert shown == JOINTS_SHOWN[kind]

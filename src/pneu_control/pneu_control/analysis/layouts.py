@@ -4,7 +4,9 @@ A run's bag (or the live view, ``pneu run --live``) opens in Foxglove and
 PlotJuggler; these layouts show it as the paper does: reference against
 measured, the error, the valve voltage, the chamber pressures, the observer
 states and (Foxglove) the diagnostics. Kinds: ``linear`` (position tracking:
-sine, smooth step), ``rotary`` (constant speed) and ``both``. The files ship in
+sine, smooth step), ``rotary`` (constant speed), ``both``, ``angle`` (rotary angle
+positioning, ``rotary_control: angle``: the encoder angle θ against its reference)
+and ``task`` (a task or a joint trajectory: the rod's position and the angle). The files ship in
 ``config/layouts/`` (installed to ``share/<pkg>/config/layouts/``) and are
 generated here from the topic table, so they always name topics and joint
 names the bag has (``python -m pneu_control.analysis.layouts [DIR]``
@@ -59,11 +61,15 @@ __all__ = [
     "write_layouts",
 ]
 
+#: kind -> its views (a tab each): ``linear`` (x), ``rotary`` (ω) or ``angle`` (θ)
 KINDS: dict[str, tuple[str, ...]] = {
     "linear": ("linear",),
     "rotary": ("rotary",),
     "both": ("linear", "rotary"),
+    "angle": ("angle",),
+    "task": ("linear", "angle"),
 }
+_AXIS_OF_VIEW = {"linear": "linear", "rotary": "rotary", "angle": "rotary"}
 
 #: JointState topics -> their ``name`` array (the contract: topics.py, wire.py)
 JOINT_NAMES: dict[str, tuple[str, ...]] = {
@@ -110,15 +116,24 @@ def _state(axis: str, name: str, label: str | None = None) -> Curve:
     return Curve(CONTROLLER_STATE_TOPIC[axis], "position", label or name, name)
 
 
-def plots_for(axis: str) -> tuple[tuple[Plot, ...], tuple[Plot, ...]]:
-    """(signal plots, observer plots) of one axis."""
-    if axis == "linear":
+def plots_for(view: str) -> tuple[tuple[Plot, ...], tuple[Plot, ...]]:
+    """(signal plots, observer plots) of one view: ``linear``, ``rotary`` (speed) or
+    ``angle`` (the rotary axis under ``rotary_control: angle``)."""
+    axis = _AXIS_OF_VIEW[view]
+    if view == "linear":
         meas = Curve(
             JOINT_STATE_TOPIC["linear"], "position", "measured: linear (laser x)", "linear"
         )
         what, unit, dunit, ddunit = "position", "m", "m/s", "m/s²"
         chambers = [t for t, (attr, _) in PRESSURE_TOPICS.items() if attr in ("p_c1", "p_c2")]
         where = "cylinder chamber"
+    elif view == "angle":
+        meas = Curve(
+            JOINT_STATE_TOPIC["rotary"], "position", "measured: rotary angle (encoder θ)", "rotary"
+        )
+        what, unit, dunit, ddunit = "angle", "rad", "rad/s", "rad/s²"
+        chambers = [t for t, (attr, _) in PRESSURE_TOPICS.items() if attr == "p_m1"]
+        where = "motor inlet"
     else:
         meas = Curve(
             JOINT_STATE_TOPIC["rotary"], "velocity", "measured: rotary (encoder ω)", "rotary"
@@ -126,6 +141,7 @@ def plots_for(axis: str) -> tuple[tuple[Plot, ...], tuple[Plot, ...]]:
         what, unit, dunit, ddunit = "speed", "rad/s", "rad/s²", "rad/s³"
         chambers = [t for t, (attr, _) in PRESSURE_TOPICS.items() if attr == "p_m1"]
         where = "motor inlet"
+    key = view  # panel keys unique within a layout
     pressures = tuple(
         Curve(t, "fluid_pressure", PRESSURE_TOPICS[t][1].replace("_", " ")) for t in chambers
     )
@@ -134,29 +150,29 @@ def plots_for(axis: str) -> tuple[tuple[Plot, ...], tuple[Plot, ...]]:
     )
     signals = (
         Plot(
-            f"{axis}_{what}",
+            f"{key}_{what}",
             f"{axis} {what}: reference vs measured [{unit}]",
             (_state(axis, "reference"), meas),
         ),
-        Plot(f"{axis}_error", f"{axis} error e = r − y [{unit}]", (_state(axis, "error"),)),
+        Plot(f"{key}_error", f"{axis} error e = r − y [{unit}]", (_state(axis, "error"),)),
         Plot(
-            f"{axis}_valve",
+            f"{key}_valve",
             f"{axis} valve voltage [V] (5 V = closed)",
             (valve, _state(axis, "u_raw", "u_raw (before saturation)")),
         ),
-        Plot(f"{axis}_pressure", f"{axis} {where} pressure [Pa abs]", pressures),
+        Plot(f"{key}_pressure", f"{axis} {where} pressure [Pa abs]", pressures),
     )
     observers = (
         Plot(
-            f"{axis}_z1",
+            f"{key}_z1",
             f"{axis} observer z1 vs measured [{unit}]",
             (_state(axis, "z1"), _state(axis, "measured")),
         ),
-        Plot(f"{axis}_z2", f"{axis} observer z2 [{dunit}]", (_state(axis, "z2"),)),
+        Plot(f"{key}_z2", f"{axis} observer z2 [{dunit}]", (_state(axis, "z2"),)),
         Plot(
-            f"{axis}_z3", f"{axis} observer z3, total disturbance [{ddunit}]", (_state(axis, "z3"),)
+            f"{key}_z3", f"{axis} observer z3, total disturbance [{ddunit}]", (_state(axis, "z3"),)
         ),
-        Plot(f"{axis}_s", f"{axis} sliding variable s [{dunit}]", (_state(axis, "s"),)),
+        Plot(f"{key}_s", f"{axis} sliding variable s [{dunit}]", (_state(axis, "s"),)),
     )
     return signals, observers
 
