@@ -75,7 +75,8 @@ from pneu_control.algorithms.smc import (
     k_field,
     lambda_r_field,
     omega_0_field,
-    sat,
+    reaching_command,
+    sliding_surface,
 )
 from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predict3
 
@@ -210,9 +211,9 @@ def eso_smc_start(c, s, table, inp, u_prev, h0, h1, h2):
         a = h2 if math.isfinite(h2) else 0.0
         s.z3 = a - c.b0 * u_applied - f_k
         s.integral = -(ed + c.c1 * e) / c.c2
-    sv = ed + c.c1 * e + c.c2 * s.integral
+    sv = sliding_surface(e, ed, s.integral, c.c1, c.c2)
     s.s = sv
-    nominal = c.eps * sat(sv, c.delta, c.k) + inp.r_ddot + c.c1 * ed + c.c2 * e - f_k
+    nominal = reaching_command(sv, e, ed, inp.r_ddot, c.c1, c.c2, c.eps, c.delta, c.k) - f_k
     u = (nominal - s.z3) / c.b0
     s.u_raw = u
     return c.hi if u > c.hi else (c.lo if u < c.lo else u)
@@ -243,7 +244,7 @@ def eso_smc_update(c, s, table, inp):
     integral = s.integral + T * e
     c1 = c.c1
     c2 = c.c2
-    sv = ed + c1 * e + c2 * integral
+    sv = sliding_surface(e, ed, integral, c1, c2)
     s.s = sv
     if c.fric:
         f_k = friction_term(c, z1, z2)
@@ -251,7 +252,7 @@ def eso_smc_update(c, s, table, inp):
     else:
         f_k = 0.0
     # Eq. 30/31 (fixed): ṡ = −ε sat(s)  (Eq. 29)
-    u = (c.eps * sat(sv, c.delta, c.k) + r_ddot + c1 * ed + c2 * e - z3 - f_k) / c.b0
+    u = (reaching_command(sv, e, ed, r_ddot, c1, c2, c.eps, c.delta, c.k) - z3 - f_k) / c.b0
     s.u_raw = u
     if c.aw:  # conditional integration (see module docstring)
         s.integral = conditional_integral(s.integral, integral, e, u, sv, c.lo, c.hi, c.delta)

@@ -140,7 +140,12 @@ from pneu_msgs_py.params.records import RecordType, kernel
 
 from pneu_control.algorithms.base import MAX_HISTORY, AlgorithmKernel, KernelAlgorithm
 from pneu_control.algorithms.eso_smc_plus_params import EsoSmcPlusParams
-from pneu_control.algorithms.smc import conditional_integral, sat
+from pneu_control.algorithms.smc import (
+    conditional_integral,
+    reaching_command,
+    sat,
+    sliding_surface,
+)
 from pneu_control.algorithms.valve_curve import (
     VALVE_FIELDS,
     ValveCurve,
@@ -284,9 +289,9 @@ def law_force(c, s, inp, F_p, integrate):
     integral = s.integral + T * e
     c1 = c.c1
     c2 = c.c2
-    sv = ed + c1 * e + c2 * integral
+    sv = sliding_surface(e, ed, integral, c1, c2)
     s.s = sv
-    a_d = c.eps * sat(sv, c.delta, c.k) + r_ddot + c1 * ed + c2 * e - z3
+    a_d = reaching_command(sv, e, ed, r_ddot, c1, c2, c.eps, c.delta, c.k) - z3
     # desired piston force (Eq. 1 with the Eq. 2 friction of the reference speed)
     F_r = c.M_k * r_ddot + friction(c, r_dot)  # the reference's own force
     F_d = F_r + c.M_k * (a_d - r_ddot)
@@ -361,9 +366,9 @@ def update_angle(c, s, table, inp, v_in):
     edd = wd_c - z3
     c1 = c.c1
     c2 = c.c2
-    sv = edd + c1 * ed + c2 * e  # = ė_ω + 2λ e_ω + λ² ∫e_ω (Eq. 26 fixed)
+    sv = sliding_surface(ed, edd, e, c1, c2)  # = ė_ω + 2λ e_ω + λ² ∫e_ω (Eq. 26 fixed)
     s.s = sv
-    v = (c.eps * sat(sv, c.delta, c.k) + wdd_r + c1 * edd + c2 * ed - z4) / b0
+    v = (reaching_command(sv, ed, edd, wdd_r, c1, c2, c.eps, c.delta, c.k) - z4) / b0
     if not angle_inputs:
         # anti-windup: the angle error is frozen while the valve saturates in e's direction
         if (e > 0.0 and v > c.v_hi) or (e < 0.0 and v < c.v_lo):

@@ -27,7 +27,9 @@ __all__ = [
     "k_field",
     "lambda_r_field",
     "omega_0_field",
+    "reaching_command",
     "sat",
+    "sliding_surface",
 ]
 
 POSITIVE = {"lo": 0.0, "lo_open": True}  # strictly positive
@@ -42,6 +44,22 @@ def sat(s: float, delta: float, k: float) -> float:
     if s < -delta:
         return -1.0
     return k * s
+
+
+@kernel
+def sliding_surface(e: float, ed: float, integral: float, c1: float, c2: float) -> float:
+    """Eq. 26 (fixed, errata: a double pole at −λ): s = ė + c1 e + c2 ∫e, c1 = 2λ, c2 = λ²."""
+    return ed + c1 * e + c2 * integral
+
+
+@kernel
+def reaching_command(
+    sv: float, e: float, ed: float, r_ddot: float, c1: float, c2: float,
+    eps: float, delta: float, k: float,
+) -> float:  # fmt: skip
+    """Eq. 29–30 (fixed): the second derivative that makes ṡ = −ε sat(s):
+    ε sat(s) + r̈ + c1 ė + c2 e (the law subtracts the disturbance estimate and divides by b0)."""
+    return eps * sat(sv, delta, k) + r_ddot + c1 * ed + c2 * e
 
 
 @kernel
