@@ -17,8 +17,8 @@ runs in process. Here it is fed from the topics and its decisions go out as mess
 
 The task's time base starts at the first sample after ``start`` (autostart: the first
 sample): t = (stamp − that stamp)·1e-9 s, as the runner's (its first sample is stamp 0).
-A trip of the supervisor is seen on ``/diagnostics`` (a ``<node>: safety ...`` status at
-level ERROR) and aborts the task, as in process -- over ROS a few samples later, since
+A trip of the supervisor is seen on ``/diagnostics`` (a ``<node>: safety <axis> <rule>``
+transition at level ERROR) and aborts the task, as in process -- over ROS a few samples later, since
 ``/diagnostics`` is not part of the lockstep.
 """
 
@@ -42,8 +42,13 @@ _OUTCOME = {"running": "running", "completed": "completed", "aborted": "aborted"
 
 
 def is_trip(status: DiagStatus) -> bool:
-    """A supervisor status or transition that holds an axis safe (ERROR, ``<node>: safety ...``)."""
-    return status.level == 2 and ": safety " in status.name
+    """A supervisor transition that takes an axis safe: ERROR, named ``<node>: safety <axis>
+    <rule>`` (:func:`pneu_sim.nodes.sim_core.safety_statuses`; the driver's alike). The
+    nodes' 1 Hz state statuses (``<node>: safety <axis>``) are not transitions: before the
+    first command an axis reads SAFE there, which no task must take for a trip."""
+    if status.level != 2 or ": safety " not in status.name:
+        return False
+    return len(status.name.split(": safety ", 1)[1].split()) == 2
 
 
 class _Recorded:
@@ -114,7 +119,9 @@ class TaskShellCore:
     def on_diagnostics(self, statuses: list[DiagStatus]) -> None:
         """``/diagnostics``: a trip aborts a running task at the next sample."""
         for st in statuses:
-            if ": safety " in st.name and st.level >= 1:
+            if not (": safety " in st.name and len(st.name.split(": safety ", 1)[1].split()) == 2):
+                continue  # not a transition
+            if st.level >= 1:
                 self.recorded.safety_events.append(_Event(st))
             if is_trip(st):
                 self.tripped = True
