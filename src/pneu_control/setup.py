@@ -48,13 +48,13 @@ setup(
     entry_points={
         "console_scripts": [
             "pneu = pneu_control.cli.main:cli",
-            "linear_controller = pneu_control.nodes.controller_node:main_linear",
-            "rotary_controller = pneu_control.nodes.controller_node:main_rotary",
-            "logger = pneu_control.nodes.logger_node:main",
-            "controller_manager = pneu_control.nodes.controller_manager:main",
+            "linear_controller = pneu_control.nodes:linear_controller",
+            "rotary_controller = pneu_control.nodes:rotary_controller",
+            "logger = pneu_control.nodes:logger",
+            "controller_manager = pneu_control.nodes:controller_manager",
             "bench_ros = pneu_control.bench.ros_graph:main",
-            "exciter = pneu_control.nodes.exciter_node:main",
-            "task_runner = pneu_control.nodes.task_node:main",
+            "exciter = pneu_control.nodes:exciter",
+            "task_runner = pneu_control.nodes:task_runner",
         ],
     },
 )

@@ -35,6 +35,6 @@ setup(
     description="Driver for the NI PCI-6221 rig through nidaqmx (hardware-timed 1 kHz), DAQ scaling and the safety supervisor.",
     license="Apache-2.0",
     entry_points={
-        "console_scripts": ["driver_node = pneu_driver.nodes.driver_node:main"],
+        "console_scripts": ["driver_node = pneu_driver.nodes:driver_node"],
     },
 )

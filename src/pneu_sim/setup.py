@@ -36,7 +36,7 @@ setup(
     description="Physics twin of the linear-rotary pneumatic actuator (Jia et al.) and its ROS 2 sim node.",
     license="Apache-2.0",
     entry_points={
-        "console_scripts": ["sim_node = pneu_sim.nodes.sim_node:main"],
+        "console_scripts": ["sim_node = pneu_sim.nodes:sim_node"],
         # the twin as a DAQ, found by name by pneu_driver (backend: sim) without an import
         "pneu_driver.backends": ["sim = pneu_sim.daq_sim.backend:make_backend"],
     },

@@ -182,8 +182,10 @@ class TaskShellCore:
     # -- the end ----------------------------------------------------------------
     def interrupted(self) -> None:
         """Shut down before the task ended: the running segment ends at the last sample."""
-        if self.base_ns is not None and self.last is not None and not self.finished:
-            self.driver.interrupted((self.last.stamp_ns - self.base_ns) * 1e-9)
+        if self.finished:
+            return
+        started = self.base_ns is not None and self.last is not None
+        self.driver.interrupted((self.last.stamp_ns - self.base_ns) * 1e-9 if started else 0.0)
 
     def report(self) -> dict[str, Any]:
         """The task report (:func:`pneu_control.task.report.report_dict`) of what ran."""
