@@ -110,9 +110,7 @@ def test_ctrl_c_mid_task_ends_every_process_cleanly_and_reports_interrupted(tmp_
     def ctrl_c(proc):
         os.kill(proc.pid, signal.SIGINT)  # Ctrl-C while the screw segment runs
 
-    rc, log = _launch(
-        [f"task:={task}", f"out:={out}"], 600, "start: segment 2", ctrl_c
-    )
+    rc, log = _launch([f"task:={task}", f"out:={out}"], 600, "start: segment 2", ctrl_c)
     assert rc in (0, 130), log[-3000:]  # launch's own exit status on a SIGINT
     _clean(log)
     rep = json.loads((out / "task_report.json").read_text())
@@ -134,9 +132,7 @@ def test_abort_service_takes_both_valves_safe_and_ends_the_task(tmp_path):
         )  # fmt: skip
         assert "success=True" in res.stdout, res.stdout + res.stderr
 
-    rc, log = _launch(
-        [f"task:={task}", f"out:={out}"], 600, "start: segment 2", abort
-    )
+    rc, log = _launch([f"task:={task}", f"out:={out}"], 600, "start: segment 2", abort)
     assert rc == 0, log[-3000:]
     _clean(log)
     rep = json.loads((out / "task_report.json").read_text())
