@@ -40,6 +40,7 @@ ROS_DEPS = {
         "std_srvs",
         "diagnostic_msgs",
         "rosgraph_msgs",
+        "trajectory_msgs",
         "rcl_interfaces",
         "builtin_interfaces",
         "launch",
@@ -81,6 +82,7 @@ ROS_ONLY = {
     "std_srvs",
     "diagnostic_msgs",
     "rosgraph_msgs",
+    "trajectory_msgs",
     "rcl_interfaces",
 }
 
@@ -285,13 +287,26 @@ def test_setup_py_data_files_and_resource_marker(pkg):
 def test_console_scripts_point_at_existing_functions(pkg):
     for name, target in _console_scripts(pkg).items():
         module, _, func = target.partition(":")
-        path = SRC / pkg / (module.replace(".", "/") + ".py")
-        assert path.is_file(), (
-            f"{pkg}: console script {name} -> {target}: no {path.relative_to(SRC)}"
+        base = SRC / pkg / module.replace(".", "/")
+        path = (
+            base.with_suffix(".py") if base.with_suffix(".py").is_file() else base / "__init__.py"
         )
+        assert path.is_file(), f"{pkg}: console script {name} -> {target}: no {path}"
         tree = ast.parse(path.read_text(encoding="utf-8"))
         defs = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
-        assert func in defs, f"{pkg}: console script {name} -> {target}: no function {func}"
+        # a node's entry: name = node_entry("module", "function") -- that function must exist
+        entries = {
+            n.targets[0].id: [a.value for a in n.value.args]
+            for n in tree.body
+            if isinstance(n, ast.Assign)
+            and isinstance(n.value, ast.Call)
+            and getattr(n.value.func, "id", "") == "node_entry"
+        }
+        assert func in defs or func in entries, f"{pkg}: console script {name} -> {target}"
+        if func in entries:
+            mod, fn = entries[func]
+            node_tree = ast.parse((SRC / pkg / (mod.replace(".", "/") + ".py")).read_text())
+            assert fn in {n.name for n in node_tree.body if isinstance(n, ast.FunctionDef)}
 
 
 @pytest.mark.parametrize("pkg", PACKAGES)
@@ -304,17 +319,15 @@ def test_setup_cfg_script_dirs(pkg):
 
 def test_node_executables_are_registered():
     scripts = {pkg: _console_scripts(pkg) for pkg in PACKAGES}
-    assert scripts["pneu_sim"]["sim_node"] == "pneu_sim.nodes.sim_node:main"
-    assert scripts["pneu_driver"]["driver_node"] == "pneu_driver.nodes.driver_node:main"
-    assert (
-        scripts["pneu_control"]["linear_controller"]
-        == "pneu_control.nodes.controller_node:main_linear"
-    )
-    assert (
-        scripts["pneu_control"]["rotary_controller"]
-        == "pneu_control.nodes.controller_node:main_rotary"
-    )
-    assert scripts["pneu_control"]["logger"] == "pneu_control.nodes.logger_node:main"
+    for pkg, exe in (
+        ("pneu_sim", "sim_node"),
+        ("pneu_driver", "driver_node"),
+        *(
+            ("pneu_control", e)
+            for e in ("linear_controller", "rotary_controller", "logger", "task_runner")
+        ),
+    ):
+        assert scripts[pkg][exe] == f"{pkg}.nodes:{exe}"  # node_entry: imported under a guard
 
 
 # --- launch files, executed against stand-ins -------------------------------
@@ -441,6 +454,8 @@ def _node_param_types(package: str, executable: str) -> dict[str, type]:
         return base | dict.fromkeys(_declared_params(package, executable), str)
     if (package, executable) == ("pneu_control", "exciter"):
         return base | _declared_param_types(package, "exciter_node")
+    if (package, executable) == ("pneu_control", "task_runner"):
+        return base | _declared_param_types(package, "task_node")
     module = {"logger": "logger_node", "driver_node": "driver_node"}[executable]
     return base | dict.fromkeys(_declared_params(package, module), str)
 
@@ -467,8 +482,13 @@ def _flatten(d: dict, prefix: str = "") -> dict:
     return out
 
 
+_TASK = str(ROOT / "config" / "tasks" / "coupling_insert_lock.yaml")
 _OVERRIDES = {
     "excite.launch.py": [{}, {"target": "rig", "axes": "linear", "level": "quick"}],
+    "task.launch.py": [
+        {"task": _TASK},
+        {"task": _TASK, "target": "rig", "plumbing": "bidirectional", "executor": "single"},
+    ],
 }
 _DEFAULT_OVERRIDES = [
     {},

@@ -44,49 +44,15 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from pneu_control.nodes.task_core import TaskShellCore
 
-_STRINGS = {
-    "task_file": "the task YAML (config/tasks/*.yaml; format: pneu_control/task/program.py)",
-    "plant_file": "plant YAML the task is checked against ('' = the installed plant.yaml)",
-    "controllers_file": "controllers YAML the task's overrides apply to ('' = installed)",
-    "safety_file": "safety YAML the task's limits are checked against ('' = installed)",
-    "plumbing": "rotary plumbing: paper or bidirectional ('' = the task's, else the plant's)",
-    "out": "directory for task_report.json / task_report.md at the end ('' = none)",
-}
-
 
 class TaskRunnerNode(ShellDefaults, Node):
     """The task runner as an rclpy node (see the module docstring)."""
 
     def __init__(self, **node_kwargs):
         super().__init__("task_runner", **node_kwargs)
-        ro = {"read_only": True}
-        for name, desc in _STRINGS.items():
-            self.declare_parameter(name, "", ParameterDescriptor(description=desc, **ro))
-        self.declare_parameter(
-            "mode",
-            "lockstep",
-            ParameterDescriptor(
-                description="lockstep (answer every sample; the sim waits) or realtime",
-                additional_constraints="one of lockstep, realtime",
-                **ro,
-            ),
-        )
-        self.declare_parameter(
-            "autostart",
-            True,
-            ParameterDescriptor(description="start at the first sample (else on ~/start)", **ro),
-        )
-        self.declare_parameter(
-            "status_rate_hz",
-            10.0,
-            ParameterDescriptor(
-                description="realtime: the task's state on the progress topic this often "
-                "(events go out when they happen)",
-                floating_point_range=[FloatingPointRange(from_value=0.1, to_value=100.0)],
-                **ro,
-            ),
-        )
-        g = {n: self.get_parameter(n).value for n in (*_STRINGS, "mode", "autostart")}
+        self._declare_parameters()
+        names = ("task_file", "plant_file", "controllers_file", "safety_file", "plumbing")
+        g = {n: self.get_parameter(n).value for n in (*names, "out", "mode", "autostart")}
         if g["mode"] not in ("lockstep", "realtime"):
             raise ParamError("mode", g["mode"], "one of lockstep, realtime")
         if not g["task_file"]:
@@ -132,6 +98,51 @@ class TaskRunnerNode(ShellDefaults, Node):
         self.get_logger().info(
             f"task {p.name}: {len(p.segments)} segments, at most {p.planned_s:.3g} s; "
             + ("starts at the first sample" if g["autostart"] else "waits for ~/start")
+        )
+
+    def _declare_parameters(self) -> None:
+        """Every parameter read-only: read once at start."""
+
+        def ro(description: str, **kw) -> ParameterDescriptor:
+            return ParameterDescriptor(description=description, read_only=True, **kw)
+
+        self.declare_parameter(
+            "task_file",
+            "",
+            ro("the task YAML (config/tasks/*.yaml; format: pneu_control/task/program.py)"),
+        )
+        self.declare_parameter(
+            "plant_file", "", ro("plant YAML the task is checked against ('' = installed)")
+        )
+        self.declare_parameter(
+            "controllers_file", "", ro("controllers YAML the task's overrides apply to")
+        )
+        self.declare_parameter(
+            "safety_file", "", ro("safety YAML the task is checked against ('' = installed)")
+        )
+        self.declare_parameter(
+            "plumbing", "", ro("paper or bidirectional ('' = the task's, else the plant's)")
+        )
+        self.declare_parameter(
+            "out", "", ro("directory of task_report.json / task_report.md ('' = none)")
+        )
+        self.declare_parameter(
+            "mode",
+            "lockstep",
+            ro(
+                "lockstep (answer every sample; the sim waits) or realtime",
+                additional_constraints="one of lockstep, realtime",
+            ),
+        )
+        self.declare_parameter("autostart", True, ro("start at the first sample (else on ~/start)"))
+        self.declare_parameter(
+            "status_rate_hz",
+            10.0,
+            ro(
+                "realtime: the task's state on the progress topic this often (events go out "
+                "when they happen)",
+                floating_point_range=[FloatingPointRange(from_value=0.1, to_value=100.0)],
+            ),
         )
 
     # -- per sample -----------------------------------------------------------------

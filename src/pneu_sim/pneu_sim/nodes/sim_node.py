@@ -124,27 +124,9 @@ class SimNode(ShellDefaults, Node):
             if self.lockstep
             else None
         )
-        cmd_qos = to_rclpy(sub_qos_for(VALVE_COMMAND_TOPIC["linear"], p.mode), rq)
-        self.cmd_subs = [
-            self.create_subscription(
-                JointState,
-                VALVE_COMMAND_TOPIC[a],
-                lambda data, a=a: self._on_command(data, a),  # raw bytes, one argument
-                cmd_qos,
-                raw=True,
-            )
-            for a in (() if hosted else self.axes)
-        ]
+        self._create_subscriptions(hosted)
         self.diag_pub = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_TOPIC, to_rclpy(DIAGNOSTICS, rq)
-        )
-        # a task runner's progress: loads, e-stop; with task.wait part of the lockstep
-        self.gate = TaskGate(self.core, p.task)
-        self.task_sub = self.create_subscription(
-            DiagnosticArray,
-            TASK_PROGRESS_TOPIC,
-            self._on_task_progress,
-            to_rclpy(qos_for(TASK_PROGRESS_TOPIC, p.mode), rq),
         )
         self.create_service(Trigger, "~/estop", self._on_estop)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -170,6 +152,31 @@ class SimNode(ShellDefaults, Node):
             + (" (controllers hosted in this process)" if hosted else "")
             + f", duration {p.duration_s:g} s (0 = endless), safety supervisor "
             + ("on" if sup else "off")
+        )
+
+    def _create_subscriptions(self, hosted: bool) -> None:
+        """The controllers' commands (raw; none when hosted) and the task runner's progress
+        (loads, e-stop; with ``task.wait`` part of the lockstep)."""
+        from rclpy import qos as rq
+
+        mode = self.p.mode
+        cmd_qos = to_rclpy(sub_qos_for(VALVE_COMMAND_TOPIC["linear"], mode), rq)
+        self.cmd_subs = [
+            self.create_subscription(
+                JointState,
+                VALVE_COMMAND_TOPIC[a],
+                lambda data, a=a: self._on_command(data, a),  # raw bytes, one argument
+                cmd_qos,
+                raw=True,
+            )
+            for a in (() if hosted else self.axes)
+        ]
+        self.gate = TaskGate(self.core, self.p.task)
+        self.task_sub = self.create_subscription(
+            DiagnosticArray,
+            TASK_PROGRESS_TOPIC,
+            self._on_task_progress,
+            to_rclpy(qos_for(TASK_PROGRESS_TOPIC, mode), rq),
         )
 
     def safe_shutdown(self) -> None:
