@@ -352,6 +352,8 @@ class SimLoop:
             k = 0
             while not self.stop_event.is_set():
                 started = pacer.wait(k)
+                if self.n_end:  # catching up never steps past the last sample
+                    started = min(started, self.n_end - 1)
                 with self.lock:
                     events = []
                     if k == 0:
