@@ -82,6 +82,7 @@ def _supervisor(sup: Any, scaling: Any, sp: np.ndarray, si: np.ndarray) -> None:
     sp[L.SP_STALL_BAND], sp[L.SP_STALL_OMEGA] = r.stall_band_v, r.stall_omega
     sp[L.SP_RAD_PER_COUNT], sp[L.SP_TH_HI], sp[L.SP_TH_LO] = r.rad_per_count, r.th_hi, r.th_lo
     sp[L.SP_AHYST], sp[L.SP_ADECEL] = r.angle_hyst, r.max_decel_rad_s2
+    sp[L.SP_ROT_IDLE], sp[L.SP_ALAG] = r.rot_idle_v, r.angle_lag_s
     sp[L.SP_V_PER_PA], sp[L.SP_P_A] = scaling.v_per_pa, scaling.p_a
     sp[L.SP_V_PER_M], sp[L.SP_V_MID] = scaling.v_per_m, scaling.v_mid
     si[L.SI_T_NS], si[L.SI_WD_NS] = th["T_ns"], th["watchdog_ns"]

@@ -41,6 +41,7 @@ from pneu_control.fastloop.layout import (
     SP_ACCEL,
     SP_ADECEL,
     SP_AHYST,
+    SP_ALAG,
     SP_DECEL,
     SP_HYST,
     SP_LHI,
@@ -52,6 +53,7 @@ from pneu_control.fastloop.layout import (
     SP_PMAX_C2,
     SP_PMAX_M1,
     SP_RAD_PER_COUNT,
+    SP_ROT_IDLE,
     SP_STALL_BAND,
     SP_STALL_OMEGA,
     SP_STALL_PA,
@@ -125,6 +127,8 @@ def _load(sp, si, sf, sn):
     r.th_lo = sp[SP_TH_LO]
     r.angle_hyst = sp[SP_AHYST]
     r.max_decel_rad_s2 = sp[SP_ADECEL]
+    r.rot_idle_v = sp[SP_ROT_IDLE]
+    r.angle_lag_s = sp[SP_ALAG]
 
 
 @njit(**JIT)

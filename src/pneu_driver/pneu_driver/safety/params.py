@@ -169,7 +169,7 @@ class SafetyParams:
         allowed="[-1e+06, 1e+06] °, more than angle_min_deg",
     )
     angle_margin_deg: float = param(
-        10.0,
+        30.0,
         unit="°",
         lo=-3600.0,
         hi=3600.0,
@@ -182,13 +182,21 @@ class SafetyParams:
         hi=90.0,
         desc="leave the angle soft-limit zone only this far back inside it",
     )
+    angle_lag_ms: float = param(
+        20.0,
+        unit="ms",
+        lo=0.0,
+        hi=1000.0,
+        desc="the motor turns on at its speed this long once held (transport delay, spool, the "
+        "chambers' trapped or venting air): the braking angle's ω·t_lag",
+    )
     max_decel_rad_s2: float = param(
-        1000.0,
+        5000.0,
         unit="rad/s^2",
         lo=0.0,
         lo_open=True,
         hi=1.0e6,
-        desc="motor braking deceleration at 5 V assumed for the braking angle ω²/(2a)",
+        desc="motor deceleration once held, for the braking angle's ω²/(2a)",
     )
     # stalled rotation: driven, yet not turning (dead encoder or blocked rotor)
     rotary_plumbing: str = param(
@@ -203,7 +211,17 @@ class SafetyParams:
         unit="V",
         lo=0.0,
         hi=4.5,
-        desc="valve #2 beyond 5 V ± this drives the motor (inside it: holding, not driving)",
+        desc="paper plumbing: valve #2 above 5 V + this drives the motor (port B vents: the "
+        "inlet's pressure is the drive); inside it: holding, not driving",
+    )
+    stall_band_bidir_v: float = param(
+        1.0,
+        unit="V",
+        lo=0.0,
+        hi=4.5,
+        desc="bidirectional plumbing: valve #2 beyond 5 V ± this drives the motor either way "
+        "(port B's pressure is not measured: an angle held against friction may keep the "
+        "valve off centre with both chambers pressurised)",
     )
     stall_inlet_pa: float = param(
         2.51325e5,

@@ -146,7 +146,9 @@ THRESHOLDS = RecordType(
         ("th_hi", "f"),  # angle soft limits [rad] (±inf: off)
         ("th_lo", "f"),
         ("angle_hyst", "f"),  # [rad]
+        ("angle_lag_s", "f"),
         ("max_decel_rad_s2", "f"),
+        ("rot_idle_v", "f"),  # valve #2's output that does not turn the motor [V]
         ("n_xw", "i"),  # velocity window: samples held (periods + 1)
         ("n_cw", "i"),  # speed window: samples held
     ],
@@ -219,6 +221,7 @@ def thresholds(params: Any, sample_time_s: float) -> Record:
             )
         windows.append(n + 1)
     lin = p.supply_linear_pa + p.pressure_margin_pa
+    both = p.rotary_plumbing == "bidirectional"
     th_hi, th_lo = math.inf, -math.inf
     if p.angle_limits:
         th_hi = math.radians(p.angle_max_deg - p.angle_margin_deg)
@@ -246,14 +249,16 @@ def thresholds(params: Any, sample_time_s: float) -> Record:
         counts_per_rev=p.counts_per_rev,
         encoder_slack_counts=p.encoder_slack_counts,
         stall_inlet_pa=p.stall_inlet_pa,
-        stall_band_v=p.stall_band_v,
+        stall_band_v=p.stall_band_bidir_v if both else p.stall_band_v,
         stall_omega=p.stall_speed_rpm * _TWO_PI / 60.0,
-        stall_reverse=1 if p.rotary_plumbing == "bidirectional" else 0,
+        stall_reverse=1 if both else 0,
         rad_per_count=_TWO_PI / p.counts_per_rev,
         th_hi=th_hi,
         th_lo=th_lo,
         angle_hyst=math.radians(p.angle_hyst_deg),
+        angle_lag_s=p.angle_lag_ms * 1e-3,
         max_decel_rad_s2=p.max_decel_rad_s2,
+        rot_idle_v=SAFE_V if both else U_MIN_V,
         n_xw=windows[0],
         n_cw=windows[1],
     )
@@ -456,7 +461,7 @@ def stall_fault(th, s, d, now, p_m1):
     below ``stall_omega`` for longer than ``stall_ns``.
 
     Driven: the valve held during the last period (``s.u_out[1]``) beyond SAFE_V ±
-    ``stall_band_v`` toward a port that drives: forward (above) with the inlet p_m1 above
+    ``stall_band_v`` (the paper's or the bidirectional plumbing's band) toward a port that drives: forward (above) with the inlet p_m1 above
     ``stall_inlet_pa`` (the torque is there), reverse (below) only with the bidirectional
     plumbing and from the valve alone (port B's pressure p_m2 is not measured). Inside the
     band (holding an angle, both chambers trapped) the clock does not run; a breakaway that
@@ -569,13 +574,15 @@ def stroke_zone(th, s, d):
 
 @kernel
 def angle_zone(th, s, d):
-    """Angle soft limits with the braking angle ω²/(2a) (ω over the speed window), as the
-    stroke's: what changed (``ANGLE_*`` bits); ``d.braking_rad`` when something did."""
+    """Angle soft limits with the braking angle |ω| t_lag + ω²/(2a) (ω over the speed
+    window), as the stroke's: what changed (``ANGLE_*`` bits); ``d.braking_rad`` when
+    something did. The lag term: a held pneumatic motor turns on while its valve closes and
+    its chambers' air vents or is trapped (twin: ≈ ω · 10-19 ms at 5 V, 250-1700 rpm)."""
     if not s.enc_have:
         return 0
     theta = s.enc_c * th.rad_per_count
     w = s.w
-    b = w * w / (2.0 * th.max_decel_rad_s2)
+    b = abs(w) * th.angle_lag_s + w * w / (2.0 * th.max_decel_rad_s2)
     reach_hi = theta + (b if w > 0.0 else 0.0)
     reach_lo = theta - (b if w < 0.0 else 0.0)
     if not (s.azone_hi or s.azone_lo) and th.th_lo < reach_lo and reach_hi < th.th_hi:
@@ -609,8 +616,13 @@ def update_zone(th, s, d):
 def output_v(th, s, axis, blocked):
     """The voltage to write for ``axis`` (kept in ``s.u_out``): SAFE_V while ``blocked`` (a
     latched fault, the e-stop), before its first command or the first sample; a command
-    driving further into an active soft-limit zone (the stroke's for the linear axis, the
-    angle's for the rotary one) is held at SAFE_V."""
+    driving further into an active stroke soft-limit zone is held at SAFE_V.
+
+    The rotary axis in an active angle zone: no output turning further, SAFE_V included,
+    is written; it is held at ``rot_idle_v``, the output that does not drive the motor
+    (bidirectional: SAFE_V, both ports closed; paper: the inlet vented, U_MIN_V, because
+    the closed centre's leakage turns the motor on at 35-55 rpm on the nominal twin).
+    """
     u = SAFE_V
     if not blocked and s.cmd_have[axis] and s.have_sample:
         u = s.cmd_u[axis]
@@ -618,9 +630,9 @@ def output_v(th, s, axis, blocked):
             push = (u - SAFE_V) * th.u_toward_hi  # > 0: drives toward +x
             if (s.zone_hi and push > 0.0) or (s.zone_lo and push < 0.0):
                 u = SAFE_V
-        else:
-            turn = u - SAFE_V  # > 0: turns toward +θ (port A)
-            if (s.azone_hi and turn > 0.0) or (s.azone_lo and turn < 0.0):
-                u = SAFE_V
+    if axis == 1:
+        idle = th.rot_idle_v  # above: turns toward +θ (port A); below: toward −θ (port B)
+        if (s.azone_hi and u > idle) or (s.azone_lo and u < idle):
+            u = idle
     s.u_out[axis] = u
     return u

@@ -35,7 +35,7 @@ latched trip (``angle_limit``) at or beyond a soft limit, acknowledgeable out
 there so a controller can turn back.
 
 A stalled rotation (``no_rotation``): valve #2 held beyond 5 V ± ``stall_band_v``
-toward a port that drives the motor (forward with the inlet p_m1 above
+(``stall_band_bidir_v`` with the bidirectional plumbing) toward a port that drives the motor (forward with the inlet p_m1 above
 ``stall_inlet_pa``; reverse only with the bidirectional plumbing, from the valve
 alone: port B is not measured) while |ω| over the speed window stays below
 ``stall_speed_rpm`` for longer than ``stall_ms``: a blocked rotor or a dead
@@ -279,12 +279,12 @@ class SafetySupervisor:
             u = d.stall_u
             if u > SAFE_V:
                 how = (
-                    f"driven forward: valve #2 at {u:.4g} V (> {SAFE_V:g} + {p.stall_band_v:g} V), "
+                    f"driven forward: valve #2 at {u:.4g} V (> {SAFE_V:g} + {self._th.stall_band_v:g} V), "
                     f"inlet p_m1 at {s.p_m1:.6g} Pa (> {p.stall_inlet_pa:g} Pa)"
                 )
             else:
                 how = (
-                    f"driven in reverse: valve #2 at {u:.4g} V (< {SAFE_V:g} - {p.stall_band_v:g} V; "
+                    f"driven in reverse: valve #2 at {u:.4g} V (< {SAFE_V:g} - {self._th.stall_band_v:g} V; "
                     "port B's pressure not measured)"
                 )
             flag(
@@ -371,9 +371,10 @@ class SafetySupervisor:
         deg = math.degrees(st.enc_c * th.rad_per_count)
         rpm = st.w * 60.0 / (2.0 * math.pi)
         b_deg = math.degrees(self._d.braking_rad)
-        for bound, entered, left, direction in (
-            (th.th_hi, rules.ANGLE_HI_ENTERED, rules.ANGLE_HI_LEFT, "forward (+θ, above 5 V)"),
-            (th.th_lo, rules.ANGLE_LO_ENTERED, rules.ANGLE_LO_LEFT, "reverse (-θ, below 5 V)"),
+        idle = th.rot_idle_v
+        for bound, entered, left, side in (
+            (th.th_hi, rules.ANGLE_HI_ENTERED, rules.ANGLE_HI_LEFT, "above"),
+            (th.th_lo, rules.ANGLE_LO_ENTERED, rules.ANGLE_LO_LEFT, "below"),
         ):
             limit = math.degrees(bound)
             values = {"theta_deg": deg, "speed_rpm": rpm, "braking_deg": b_deg, "limit_deg": limit}
@@ -382,7 +383,7 @@ class SafetySupervisor:
                     "rotary",
                     "soft_limit",
                     WARN,
-                    f"angle soft limit: θ = {deg:.5g}°, braking {b_deg:.3g}° reaches {limit:.6g}°; {direction} commands held at {SAFE_V:g} V",
+                    f"angle soft limit: θ = {deg:.5g}°, braking {b_deg:.3g}° reaches {limit:.6g}°; outputs {side} {idle:g} V held at {idle:g} V",
                     values,
                     now,
                 )
