@@ -343,6 +343,11 @@ def test_construction_is_checked():
         DriverLoop(SimBackend(plant, rig), rig, SafetySupervisor(SafetyParams(counts_per_rev=2000)))
     with pytest.raises(ValueError, match="sample_time_s"):
         DriverLoop(SimBackend(plant, rig), rig, SafetySupervisor(SafetyParams(), 2e-3))
+    both = software_rig(rotary_plumbing="bidirectional")  # the stall rule must know it
+    with pytest.raises(ValueError, match=r"^rotary_plumbing: 'paper' refused; allowed: "):
+        DriverLoop(SimBackend(plant, both), both, SafetySupervisor(SafetyParams()))
+    sup = SafetySupervisor(SafetyParams(rotary_plumbing="bidirectional"))
+    DriverLoop(SimBackend(plant, both), both, sup)
     with pytest.raises(TypeError, match="step"):
         SimBackend(object(), rig)
 

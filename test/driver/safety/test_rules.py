@@ -3,9 +3,9 @@
 A small numba driver runs every rule of :mod:`pneu_driver.safety.rules` on numba
 records (elements of structured arrays) over a random stream of samples, commands
 and output ticks; the same stream runs through the same functions on Python
-records. Every decision (fault-key masks, command outcomes, zone changes, output
-voltages), every number behind a fired rule and the final rule state must agree
-bit for bit. (That :mod:`pneu_control.fastloop.supervisor` calls these rules and
+records. Every decision (fault-key masks, command outcomes, stroke and angle zone
+changes, output voltages), every number behind a fired rule and the final rule state
+must agree bit for bit, with the angle soft limits off and on, both plumbings. (That :mod:`pneu_control.fastloop.supervisor` calls these rules and
 holds no copy of one: test/control/fastloop/test_supervisor_single_source.py.)
 """
 
@@ -29,6 +29,9 @@ X_HI = P.stroke_m / 2 - P.stroke_margin_m
 P_LIN = P.supply_linear_pa + P.pressure_margin_pa
 P_ROT = P.supply_rotary_pa + P.pressure_margin_pa
 BAD = (math.nan, math.inf, -math.inf)
+_ANGLE_ZONE = (
+    rules.ANGLE_HI_ENTERED | rules.ANGLE_HI_LEFT | rules.ANGLE_LO_ENTERED | rules.ANGLE_LO_LEFT
+)
 
 
 @numba.njit(error_model="numpy")
@@ -55,6 +58,8 @@ def _drive(th_a, s_a, d_a, f, c, volts, have, u, u_t, now, blocked, out_i, out_f
         out_f[k, 2] = d.jump_deviation if keys & (1 << rules.ENCODER_JUMP) else 0.0
         out_f[k, 3] = d.speed_rpm if keys & (1 << rules.OVERSPEED) else 0.0
         out_f[k, 4] = d.braking_m if out_i[k, 4] else 0.0
+        out_f[k, 5] = d.braking_rad if out_i[k, 4] & _ANGLE_ZONE else 0.0
+        out_f[k, 6] = d.stall_u if keys & (1 << rules.NO_ROTATION) else 0.0
         out_i[k, 6] = d.nf_fields
         out_i[k, 7] = d.nf_volts if have[k] else 0
 
@@ -62,7 +67,7 @@ def _drive(th_a, s_a, d_a, f, c, volts, have, u, u_t, now, blocked, out_i, out_f
 def _python(th, s, d, f, c, volts, have, u, u_t, now, blocked):
     n = len(f)
     out_i = np.zeros((n, 8), dtype=np.int64)
-    out_f = np.zeros((n, 5))
+    out_f = np.zeros((n, 7))
     for k in range(n):
         t = k * T_NS
         fk = f[k].tolist()
@@ -80,6 +85,8 @@ def _python(th, s, d, f, c, volts, have, u, u_t, now, blocked):
         out_f[k, 2] = d.jump_deviation if keys & (1 << rules.ENCODER_JUMP) else 0.0
         out_f[k, 3] = d.speed_rpm if keys & (1 << rules.OVERSPEED) else 0.0
         out_f[k, 4] = d.braking_m if out_i[k, 4] else 0.0
+        out_f[k, 5] = d.braking_rad if out_i[k, 4] & _ANGLE_ZONE else 0.0
+        out_f[k, 6] = d.stall_u if keys & (1 << rules.NO_ROTATION) else 0.0
         out_i[k, 6] = d.nf_fields
         out_i[k, 7] = d.nf_volts if have[k] else 0
     return out_i, out_f
@@ -99,12 +106,13 @@ _step = st.tuples(
         st.sampled_from([0.0, *BAD]),
         st.sampled_from([0.0, 1.0, *BAD]),
     ),
-    st.sampled_from([0, 0, 1, 20, 100, 101, 1000, -50]),  # counts step
+    st.sampled_from([0, 0, 1, 20, 100, 101, 1000, -50, -120]),  # counts step
     st.tuples(_volt, _volt, _volt, _volt),
     st.booleans(),  # raw volts given
     st.tuples(
         st.sampled_from([7.0, 3.0, 0.0, 10.0, -0.001, 10.001, *BAD]),
-        st.sampled_from([6.0, 5.0, math.nan]),
+        # rotary: inside and beyond the stall band both ways, the centre, refused
+        st.sampled_from([6.0, 5.0, 5.3, 5.31, 4.7, 4.69, 2.0, 10.0, math.nan]),
     ),
     st.sampled_from([0, 0, 0, -3, 1]),  # command stamp offset [periods]: older, newer
     st.sampled_from([1, 1, 1, 6, 30]),  # output tick [periods after the sample]
@@ -115,6 +123,30 @@ _params = st.sampled_from(
         P,
         dataclasses.replace(P, extend_above_neutral=False, max_accel_rad_s2=0.0, stuck_ms=3.0),
         dataclasses.replace(P, stall_ms=2.0, velocity_window_ms=3.0, speed_window_ms=1.0),
+        # angle soft limits at ±25° (≈ 278 counts), the bidirectional stall rule, short clocks
+        dataclasses.replace(
+            P,
+            angle_limits=True,
+            angle_min_deg=-30.0,
+            angle_max_deg=30.0,
+            angle_margin_deg=5.0,
+            angle_hyst_deg=0.5,
+            max_decel_rad_s2=50.0,
+            rotary_plumbing="bidirectional",
+            stall_ms=2.0,
+            stall_speed_rpm=20.0,
+            speed_window_ms=2.0,
+        ),
+        dataclasses.replace(
+            P,
+            angle_limits=True,
+            angle_min_deg=0.0,
+            angle_max_deg=20.0,
+            angle_margin_deg=0.0,
+            angle_hyst_deg=0.0,
+            stall_band_v=0.0,
+            stall_ms=1.0,
+        ),
     ]
 )
 
@@ -137,7 +169,7 @@ def _same(a, b) -> bool:
     return all(x == y or (x != x and y != y) for x, y in zip(a, b, strict=True))
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(params=_params, steps=st.lists(_step, min_size=1, max_size=80))
 def test_compiled_and_python_rules_decide_the_same(params, steps):
     th = rules.thresholds(params, 1e-3)
@@ -146,7 +178,7 @@ def test_compiled_and_python_rules_decide_the_same(params, steps):
     th.store(arrs[0][0])
     data = _arrays(steps)
     n = len(steps)
-    out_i, out_f = np.zeros((n, 8), dtype=np.int64), np.zeros((n, 5))
+    out_i, out_f = np.zeros((n, 8), dtype=np.int64), np.zeros((n, 7))
     _drive(*arrs, *data, out_i, out_f)
     want_i, want_f = _python(*py, *data)
     assert np.array_equal(out_i, want_i)
@@ -186,13 +218,15 @@ def test_the_rules_decide_in_a_supervisor_as_in_the_kernels():
 
 
 def test_fault_key_table():
-    assert len(rules.SENSOR_KEYS) == len(set(rules.SENSOR_KEYS)) == 21
+    assert len(rules.SENSOR_KEYS) == len(set(rules.SENSOR_KEYS)) == 22
     assert rules.SENSOR_KEYS[rules.NON_FINITE_ENCODER] == "non_finite:encoder"
     assert rules.SENSOR_KEYS[rules.LIVE_RANGE + 3] == "live_range:x"
     assert rules.SENSOR_KEYS[rules.OVER_PRESSURE + 2] == "over_pressure:p_m1"
     assert rules.SENSOR_KEYS[rules.STROKE_LIMIT] == "stroke_limit:x"
     assert rules.SENSOR_KEYS[rules.STUCK] == "stuck:p_c1"
     assert rules.SENSOR_KEYS[rules.NO_ROTATION] == "no_rotation:encoder"
+    assert rules.SENSOR_KEYS[rules.ANGLE_LIMIT] == "angle_limit:encoder"
+    assert rules.sensor_key_axes(1 << rules.ANGLE_LIMIT | 1 << rules.NO_ROTATION) == 2
     assert rules.LINEAR_KEYS & rules.ROTARY_KEYS == 0
     assert rules.LINEAR_KEYS | rules.ROTARY_KEYS == (1 << len(rules.SENSOR_KEYS)) - 1
     assert rules.sensor_key_axes(1 << (rules.STUCK + 2)) == 2  # p_m1: the motor's sensor
@@ -222,3 +256,62 @@ def test_int_array_fields_round_trip():
     back = rt.new()
     back.load(arr[0])
     assert back.t == [0, 2**62 + 1, 0] and arr.dtype["t"].base == np.int64
+
+
+def _run_both(params, steps):
+    th = rules.thresholds(params, 1e-3)
+    py = (th, rules.STATE.new(), rules.FINDINGS.new())
+    arrs = tuple(rules.fresh_array(r.TYPE) for r in py)
+    th.store(arrs[0][0])
+    data = _arrays(steps)
+    n = len(steps)
+    out_i, out_f = np.zeros((n, 8), dtype=np.int64), np.zeros((n, 7))
+    _drive(*arrs, *data, out_i, out_f)
+    want_i, want_f = _python(*py, *data)
+    assert np.array_equal(out_i, want_i)
+    assert np.array_equal(out_f, want_f, equal_nan=True)
+    return want_i, want_f
+
+
+def test_the_rotary_rules_act_alike_in_a_stream_made_to_reach_them():
+    """Angle zone in and out, the angle trip, both stall directions: compiled = Python."""
+    params = dataclasses.replace(
+        P,
+        angle_limits=True,
+        angle_min_deg=-30.0,
+        angle_max_deg=30.0,
+        angle_margin_deg=5.0,
+        max_decel_rad_s2=50.0,
+        rotary_plumbing="bidirectional",
+        stall_ms=2.0,
+        stall_speed_rpm=20.0,
+        speed_window_ms=2.0,
+    )
+
+    def step(dc, u_rot, p_m1=3.0e5):
+        f = (2.5e5, 2.4e5, p_m1, 0.0, 0.0, 0.0)
+        return (f, dc, (2.0, 2.0, 2.0, 2.0), True, (5.0, u_rot), 0, 1, (0, 0))
+
+    # forward at 20 counts/ms (300 rpm) into the +25° zone, on past it (trip), back out
+    steps = [step(20, 8.0) for _ in range(20)]
+    steps += [step(-20, 2.0) for _ in range(20)]
+    steps += [step(0, 2.0) for _ in range(8)]  # reverse drive, not turning: stall
+    steps += [step(0, 5.2) for _ in range(8)]  # inside the band: no clock
+    steps += [step(0, 8.0, p_m1=1.5e5) for _ in range(8)]  # forward, inlet low: no clock
+    steps += [step(0, 8.0) for _ in range(8)]  # forward, inlet high: stall
+    keys, out_f = _run_both(params, steps)
+    zone = keys[:, 4]
+    assert zone.tolist().count(rules.ANGLE_HI_ENTERED) == 1
+    assert any(z & rules.ANGLE_HI_LEFT for z in zone)
+    k_in = int(np.argmax(zone == rules.ANGLE_HI_ENTERED))
+    assert out_f[k_in, 1] == 5.0 and out_f[k_in - 1, 1] == 8.0  # forward held at 5 V
+    trip = (keys[:, 0] >> rules.ANGLE_LIMIT) & 1
+    c = np.cumsum([s[1] for s in steps])
+    assert np.array_equal(trip == 1, np.abs(c * 360.0 / 4000) >= 25.0)
+    stall = (keys[:, 0] >> rules.NO_ROTATION) & 1
+    # sample k sees the valve of tick k - 1. Reverse: the 2 ms speed window is quiet from
+    # k = 42, the clock runs 2 ms (passes), trips at 45 and until the valve is inside the band
+    assert stall[40:49].tolist() == [0, 0, 0, 0, 0, 1, 1, 1, 1]
+    assert not stall[49:64].any()
+    assert stall[64:].tolist() == [0, 0, 0, 1, 1, 1, 1, 1]  # forward: from the inlet high
+    assert set(out_f[stall == 1, 6]) == {2.0, 8.0}  # the driving voltage, each way

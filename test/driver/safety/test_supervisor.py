@@ -374,20 +374,181 @@ def test_events_carry_time_and_string_key_values():
     assert r.sup.events() == []  # drained
 
 
-def test_no_rotation_dead_encoder_or_blocked_rotor():
-    """Inlet above stall_inlet_pa and no count for more than stall_ms -> rotary safe."""
+def test_no_rotation_driven_but_not_turning():
+    """Valve beyond the band (forward: inlet above stall_inlet_pa), |speed| below
+    stall_speed_rpm for more than stall_ms -> rotary safe; each condition at its threshold."""
     p = SafetyParams()
-    r = Rig()
     high = p.stall_inlet_pa + 1.0
-    for _ in range(int(p.stall_ms) + 1):  # counts frozen for exactly stall_ms: passes
-        out = r.tick(p_m1=high)
-    assert out == (7.0, 6.0)
-    assert r.tick(p_m1=high) == (7.0, 5.0)  # one more period: trips, linear untouched
-    assert ("rotary", "no_rotation") in rules(r.sup.events(), ERROR)
-    # exactly at the pressure threshold, or with counts moving, it never trips
+    u_fwd = (7.0, 7.0)
+    # the first sample sees no output yet (5 V); from tick 1 the valve drives, the clock
+    # runs from there: ticks 1 .. 1 + stall_ms pass (exactly stall_ms), the next trips
     r = Rig()
-    for _ in range(200):
-        assert r.tick(p_m1=p.stall_inlet_pa) == (7.0, 6.0)
-    r = Rig(rate=1)
-    for _ in range(200):
-        assert r.tick(p_m1=high) == (7.0, 6.0)
+    n_pass = int(p.stall_ms) + 2
+    for _ in range(n_pass):
+        out = r.tick(p_m1=high, u=u_fwd)
+    assert out == (7.0, 7.0)
+    assert r.tick(p_m1=high, u=u_fwd) == (7.0, 5.0)  # trips, linear untouched
+    [ev] = [e for e in r.sup.events() if e.level == ERROR]
+    assert (ev.axis, ev.rule) == ("rotary", "no_rotation")
+    assert ev.message.startswith(
+        f"rotation stalled: motor at 0 rpm (below 5 rpm) for {p.stall_ms + 1:g} ms "
+        f"(> {p.stall_ms:g} ms), driven forward: valve #2 at 7 V (> 5 + 0.3 V), inlet p_m1 at"
+    )
+    # the valve at 5 V now: not driven, the key goes, the latch stays until acknowledged
+    r.tick(p_m1=high, u=u_fwd)
+    assert ("rotary", "no_rotation") in rules(r.sup.events(), WARN)
+    assert r.sup.acknowledge("rotary")[0]
+    assert r.tick(p_m1=high, u=u_fwd) == (7.0, 7.0)
+    # never (for twice stall_ms; a constant p_m1 would freeze after stuck_ms): the inlet
+    # exactly at the threshold, the valve exactly at the band's edge, turning at 15 rpm
+    # (a count per ms), reverse drive with the paper's plumbing (the inlet vents)
+    for rig, kw in (
+        (Rig(), dict(p_m1=p.stall_inlet_pa, u=u_fwd)),
+        (Rig(), dict(p_m1=high, u=(7.0, 5.0 + p.stall_band_v))),
+        (Rig(rate=1), dict(p_m1=high, u=u_fwd)),
+        (Rig(), dict(p_m1=1.1e5, u=(7.0, 2.0))),
+    ):
+        for _ in range(int(2 * p.stall_ms)):
+            assert rig.tick(**kw)[1] != 5.0, kw
+    # slower than the threshold (a count every 20 ms: 0.75 rpm) is no rotation: trips
+    r = Rig()
+    outs = [r.tick(p_m1=high, u=u_fwd, dcounts=1 if k % 20 == 0 else 0) for k in range(200)]
+    assert outs[-1] == (7.0, 5.0)
+    assert ("rotary", "no_rotation") in rules(r.sup.events(), ERROR)
+
+
+def test_no_rotation_in_reverse_with_the_bidirectional_plumbing():
+    """Below 5 V − band drives port B: the clock runs from the valve alone (p_m2 unmeasured)."""
+    p = SafetyParams(rotary_plumbing="bidirectional")
+    r = Rig(p)
+    for _ in range(int(p.stall_ms) + 2):
+        assert r.tick(p_m1=1.1e5, u=(7.0, 3.0)) == (7.0, 3.0)
+    assert r.tick(p_m1=1.1e5, u=(7.0, 3.0)) == (7.0, 5.0)
+    [ev] = [e for e in r.sup.events() if e.level == ERROR]
+    assert ev.rule == "no_rotation" and "driven in reverse: valve #2 at 3 V (< 5 - 1 V; " in (
+        ev.message
+    )
+    # holding: the valve inside the band with both chambers pressurised never runs the clock
+    r = Rig(p)
+    for k in range(1000):
+        u = 5.0 + p.stall_band_bidir_v * (1.0 if k % 2 else -1.0)
+        assert r.tick(p_m1=4.0e5 + k % 3, u=(7.0, u)) == (7.0, u)
+    assert r.sup.status["rotary"].state == "OK"
+    # turning in reverse at 15 rpm (1 count per ms, backwards) is turning
+    r = Rig(p, rate=-1)
+    for _ in range(400):
+        assert r.tick(u=(7.0, 3.0)) == (7.0, 3.0)
+
+
+def test_angle_soft_limits_off_by_default():
+    r = Rig(rate=100)  # 1500 rpm for 2 s: 50 turns, far beyond any tool's hose
+    r.run(2000)
+    assert r.sup.angle_soft_limits == (-math.inf, math.inf)
+    assert r.sup.status["rotary"].state == "OK"
+    assert not [e for e in r.sup.events() if e.rule in ("soft_limit", "angle_limit")]
+
+
+def _limited(**kw):
+    base = dict(angle_limits=True, angle_min_deg=-90.0, angle_max_deg=90.0, angle_margin_deg=10.0)
+    return dataclasses.replace(SafetyParams(), **{**base, **kw})
+
+
+def test_angle_soft_limit_at_rest_exactly_at_the_limit():
+    p = _limited(rotary_plumbing="bidirectional")
+    lo, hi = SafetySupervisor(p).angle_soft_limits
+    assert (math.degrees(lo), math.degrees(hi)) == pytest.approx((-80.0, 80.0))
+    at_hi = round(80.0 / 0.09)  # 889 counts = 80.01°: at or beyond the soft limit
+    r = Rig(p)
+    r.tick(dcounts=at_hi - 1)  # 79.92°, the first sample (no speed yet): inside
+    assert r.run(5, dcounts=0, u=(7.0, 7.0)) == (7.0, 7.0)
+    assert r.tick(dcounts=1, u=(7.0, 7.0)) == (7.0, 5.0)  # 80.01°: trips
+    assert r.counts == at_hi
+    ev = r.sup.events()
+    assert ("rotary", "angle_limit") in rules(ev, ERROR)
+    assert ("rotary", "soft_limit") in rules(ev, WARN)
+    [trip] = [e for e in ev if e.rule == "angle_limit"]
+    assert trip.message.startswith(
+        "motor at θ = 80.01°, at or beyond the angle soft limit [-80, 80]°"
+    )
+    assert r.tick(u=(7.0, 3.0)) == (7.0, 5.0)  # latched: nothing passes
+    ok, msg = r.sup.acknowledge("rotary")  # allowed while still out there: to turn it back
+    assert ok, msg
+    assert r.tick(u=(7.0, 7.0)) == (7.0, 5.0)  # the hold still refuses turning further
+    assert r.tick(u=(7.0, 3.0)) == (7.0, 3.0)  # turning back passes
+    assert r.sup.status["rotary"].state == "LIMITED"
+    # the lower end: commands below 5 V (reverse) are held there, above 5 V pass
+    r = Rig(p)
+    r.tick(dcounts=-at_hi, u=(7.0, 3.0))
+    r.run(12, dcounts=0, u=(7.0, 3.0))
+    assert ("rotary", "angle_limit") in rules(r.sup.events(), ERROR)
+    assert r.sup.acknowledge("rotary")[0]
+    assert r.tick(u=(7.0, 3.0)) == (7.0, 5.0)
+    assert r.tick(u=(7.0, 7.0)) == (7.0, 7.0)
+
+
+@pytest.mark.parametrize(
+    ("plumbing", "direction", "u", "idle"),
+    [("paper", 1, 7.0, 0.0), ("bidirectional", 1, 7.0, 5.0), ("bidirectional", -1, 3.0, 5.0)],
+)
+def test_angle_soft_limit_counts_the_braking_angle(plumbing, direction, u, idle):
+    """600 rpm = 40 counts/ms = 62.8 rad/s: braking |ω| t_lag + ω²/(2a) = 1.26 + 0.39 rad
+    (95°) at the defaults; held where the motor does not turn: paper, the inlet vented."""
+    p = _limited(angle_min_deg=-400.0, angle_max_deg=400.0, rotary_plumbing=plumbing)
+    r = Rig(p, rate=40 * direction)  # soft limits ±390°
+    outs = [r.tick(u=(7.0, u)) for _ in range(int(380 / 0.09 / 40))]  # to ±378°
+    theta_in = [k for k, o in enumerate(outs) if o[1] == idle]
+    assert theta_in, "never held"
+    k = theta_in[0]
+    deg = 0.09 * 40 * (k + 1)  # |θ| of the sample that started the hold
+    w = 40 * 2 * math.pi / 4000 * 1e3
+    b = math.degrees(w * p.angle_lag_ms * 1e-3 + w**2 / (2 * p.max_decel_rad_s2))
+    assert deg + b >= 390.0 > deg + b - 0.09 * 40 * 1.001  # the first sample reaching it
+    assert all(o[1] == idle for o in outs[k:])  # held from then on
+    [ev] = [e for e in r.sup.events() if e.rule == "soft_limit"]
+    assert ev.level == WARN and ev.axis == "rotary"
+    side = "above" if direction > 0 else "below"
+    assert f"outputs {side} {idle:g} V held at {idle:g} V" in ev.message
+    assert r.sup.status["rotary"].state == "LIMITED"
+    # stopped there (within the encoder's plausible deceleration), the braking angle is gone:
+    # the hold releases (hysteresis 1°)
+    r.tick(dcounts=20 * direction, u=(7.0, u))
+    r.rate = 0
+    r.run(20, u=(7.0, u))
+    assert ("rotary", "soft_limit") in rules(r.sup.events(), OK)
+    assert r.sup.status["rotary"].state == "OK"
+    assert r.tick(u=(7.0, u)) == (7.0, u)
+
+
+def test_new_safety_fields_refused_with_one_line_naming_them():
+    cases = [
+        (
+            {"angle_max_deg": -4000.0},
+            r"^angle_max_deg: -4000\.0 refused; allowed: more than angle_min_deg \(-3600 °\)",
+        ),
+        (
+            {"angle_min_deg": -2.0e6},
+            r"^angle_min_deg: -2000000\.0 refused; allowed: \[-1e\+06, 1e\+06\] °",
+        ),
+        (
+            {"angle_margin_deg": 3600.0},
+            r"^angle_margin_deg: 3600\.0 refused; allowed: less than half the angle range \(3600 °\)",
+        ),
+        (
+            {"angle_margin_deg": -1.0},
+            r"^angle_margin_deg: -1\.0 refused; allowed: ≥ 0 ° \(or set allow_unsafe: true\)",
+        ),
+        ({"angle_hyst_deg": 91.0}, r"^angle_hyst_deg: 91\.0 refused; allowed: \[0, 90\]"),
+        ({"max_decel_rad_s2": 0.0}, r"^max_decel_rad_s2: 0\.0 refused; allowed: \(0, 1e\+06\]"),
+        (
+            {"rotary_plumbing": "both"},
+            r"^rotary_plumbing: 'both' refused; allowed: one of paper, bidirectional",
+        ),
+        ({"stall_band_v": 5.0}, r"^stall_band_v: 5\.0 refused; allowed: \[0, 4\.5\]"),
+        ({"stall_speed_rpm": 0.0}, r"^stall_speed_rpm: 0\.0 refused; allowed: \(0, 1000\]"),
+        ({"angle_limits": 1}, r"^angle_limits: 1 refused; allowed: true or false"),
+    ]
+    for values, pattern in cases:
+        with pytest.raises(ParamError, match=pattern):
+            from_dict(SafetyParams, values, strict=False)
+    p = from_dict(SafetyParams, {"angle_margin_deg": -1.0, "allow_unsafe": True}, strict=False)
+    assert p.unsafe_overrides() == ("angle_margin_deg=-1 ° < 0: angle soft limit beyond the range",)

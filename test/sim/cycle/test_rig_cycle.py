@@ -249,3 +249,19 @@ def test_injected_faults_act_where_the_runner_applies_them():
     assert core.counters()["silenced.linear"] == 1 and core.timeouts == {"linear": 0}
     # the AO holds 6 V (16-bit DAC); the stuck spool acted only during k = 9
     assert plant.state.u_linear == pytest.approx(6.0, abs=1e-3)
+
+
+def test_a_supervisor_for_another_plumbing_than_the_twins_is_refused():
+    """The stall rule reads from the supervisor which valve directions drive the motor."""
+    from pneu_driver.safety import SafetyParams, SafetySupervisor
+    from pneu_msgs_py.params.core import with_updates
+    from pneu_sim.physics.plant import Plant
+    from pneu_sim.physics.plant_file import load_plant
+
+    plant = Plant(with_updates(load_plant(), {"rotary.plumbing": "bidirectional"}))
+    with pytest.raises(
+        ParamError,
+        match=r"^rotary_plumbing: 'paper' refused; allowed: 'bidirectional', the twin's",
+    ):
+        RigCycle(plant, supervisor=SafetySupervisor(SafetyParams()))
+    RigCycle(plant, supervisor=SafetySupervisor(SafetyParams(rotary_plumbing="bidirectional")))

@@ -3,7 +3,9 @@
 - a linear reference must stay inside the stroke's soft limits (a reference
   beyond them drives the piston into the end stop: the supervisor can only
   hold the valve, see :mod:`pneu_driver.safety.supervisor`);
-- a rotary speed reference must stay below the overspeed limit;
+- a rotary speed reference must stay below the overspeed limit; a rotary angle
+  reference (``rotary_control: angle``) inside the angle soft limits when they are
+  on, and its rate below the overspeed limit;
 - a fault must start inside the run and act on an active axis.
 
 Each refusal is one :class:`ParamError` naming the option as the user wrote it.
@@ -23,22 +25,27 @@ from pneu_control.controller.references import axis_scale, make_reference
 __all__ = ["check_faults", "check_references", "reference_extremes"]
 
 
-def reference_extremes(params: Any, axis: str, duration_s: float) -> tuple[float, float]:
-    """(min, max) of the reference over the run, in paper units (mm or rpm).
+def reference_extremes(
+    params: Any, axis: str, duration_s: float, rate: bool = False
+) -> tuple[float, float]:
+    """(min, max) of the reference over the run, in paper units (mm, rpm or degrees);
+    ``rate``: of its rate instead (mm/s, rpm/s or °/s).
 
     Evaluated at every control period of the run: the controller sees exactly
     these values (closed forms would miss a waypoint spline's overshoot).
     """
     T = params.sample_time_s
-    ref = make_reference(params.reference, axis, sample_time_s=T)
+    control = getattr(params, "rotary_control", "speed")
+    ref = make_reference(params.reference, axis, sample_time_s=T, rotary_control=control)
+    i = 1 if rate else 0
     n = int(round(duration_s / T))
     step = max(1, n // 200_000)  # every sample up to 200 s, then every few (a smooth reference)
-    lo = hi = ref(0.0)[0]
+    lo = hi = ref(0.0)[i]
     for k in range(0, n + 1, step):
-        r = ref(k * T)[0]
+        r = ref(k * T)[i]
         lo, hi = min(lo, r), max(hi, r)
-    r_end = ref(n * T)[0]
-    scale = axis_scale(axis)
+    r_end = ref(n * T)[i]
+    scale = axis_scale(axis, control)
     return min(lo, r_end) * scale, max(hi, r_end) * scale
 
 
@@ -77,6 +84,8 @@ def check_references(spec: Any, field: str | None = None) -> None:
                     _label(params),
                     f"a position reference inside {what}; this one reaches {bad:.4g} mm",
                 )
+        elif params.rotary_control == "angle":
+            _check_angle(name, params, spec.duration_s, lo, hi, safety, supervised)
         else:
             limit = safety.max_speed_rpm if supervised else safety.rated_speed_rpm
             peak = max(abs(lo), abs(hi))
@@ -88,6 +97,36 @@ def check_references(spec: Any, field: str | None = None) -> None:
                     f"a speed reference within ±{limit:g} rpm ({what}); this one reaches "
                     f"{peak:.5g} rpm",
                 )
+
+
+def _check_angle(
+    name: str, params: Any, duration_s: float, lo: float, hi: float, safety: Any, supervised: bool
+) -> None:
+    """An angle reference (degrees): inside the angle soft limits when they are on, its rate
+    within the overspeed limit (the rated speed without a supervisor)."""
+    if supervised and safety.angle_limits:
+        a_lo = safety.angle_min_deg + safety.angle_margin_deg
+        a_hi = safety.angle_max_deg - safety.angle_margin_deg
+        bad = hi if hi > a_hi else lo if lo < a_lo else None
+        if bad is not None:
+            raise ParamError(
+                name,
+                _label(params),
+                f"an angle reference inside the angle soft limits [{a_lo:g}, {a_hi:g}]° "
+                f"(angle_min_deg/angle_max_deg less angle_margin_deg per end); this one "
+                f"reaches {bad:.5g}°",
+            )
+    limit = safety.max_speed_rpm if supervised else safety.rated_speed_rpm
+    w_lo, w_hi = reference_extremes(params, "rotary", duration_s, rate=True)
+    peak = max(abs(w_lo), abs(w_hi)) / 6.0  # °/s -> rpm
+    if peak > limit:
+        what = "the overspeed limit max_speed_rpm" if supervised else "the rated speed"
+        raise ParamError(
+            name,
+            _label(params),
+            f"an angle reference turning within ±{limit:g} rpm ({what}); this one turns at "
+            f"{peak:.5g} rpm",
+        )
 
 
 def _label(params: Any) -> str:

@@ -100,9 +100,10 @@ def run_compiled(
         AxisController(axis, spec.controllers[axis])
     sup = scaling = None
     if spec.safety is not None:
-        from pneu_driver.safety import SafetySupervisor
+        from pneu_driver.safety import SafetySupervisor, check_plumbing
         from pneu_sim.faults.injection import SensorScaling
 
+        check_plumbing(spec.safety, plant.params.rotary.plumbing, "the twin's rotary.plumbing")
         sup = SafetySupervisor(spec.safety, sample_time_s=period)
         scaling = SensorScaling(plant.params)
     packed = pack_spec(spec, sup, scaling)

@@ -146,6 +146,13 @@ def build_spec(options: RunOptions | None = None, /, **fields: Any) -> RunSpec:
     controllers, windows = _controllers(o)
     fault_specs = parse_faults(o.faults)
     safety_params = _safety_params(o)
+    if safety_params is not None:
+        from pneu_driver.safety import check_plumbing
+
+        with from_option("--safety" if o.safety_file else None):
+            check_plumbing(
+                safety_params, plant_params.rotary.plumbing, "the twin's rotary.plumbing"
+            )
     check_faults(fault_specs, o.axes, duration_s)
     spec = RunSpec(
         axes=o.axes,

@@ -24,14 +24,17 @@ N_REC_AXIS = 12
 N_REC = REC_AXIS + 2 * N_REC_AXIS
 
 # ---------------------------------------------------------------- supervisor thresholds
-N_SP = 20
+N_SP = 29
 (
     SP_X_HI, SP_X_LO, SP_X_ABS, SP_PMAX_C1, SP_PMAX_C2, SP_PMAX_M1, SP_PLO, SP_PHI, SP_LLO, SP_LHI,
     SP_TOWARD, SP_DECEL, SP_HYST, SP_MAX_RPM, SP_ACCEL, SP_STALL_PA, SP_V_PER_PA, SP_P_A,
-    SP_V_PER_M, SP_V_MID,
+    SP_V_PER_M, SP_V_MID, SP_STALL_BAND, SP_STALL_OMEGA, SP_RAD_PER_COUNT, SP_TH_HI, SP_TH_LO,
+    SP_AHYST, SP_ADECEL, SP_ROT_IDLE, SP_ALAG,
 ) = range(N_SP)  # fmt: skip
-SI_T_NS, SI_WD_NS, SI_STUCK_NS, SI_STALL_NS, SI_NXW, SI_NCW, SI_CPR, SI_SLACK = range(8)
-N_SI = 8
+(
+    SI_T_NS, SI_WD_NS, SI_STUCK_NS, SI_STALL_NS, SI_NXW, SI_NCW, SI_CPR, SI_SLACK, SI_REVERSE,
+) = range(9)  # fmt: skip
+N_SI = 9
 
 # ---------------------------------------------------------------- kernel status
 OK = 0

@@ -78,12 +78,18 @@ def _supervisor(sup: Any, scaling: Any, sp: np.ndarray, si: np.ndarray) -> None:
     sp[L.SP_MAX_RPM] = p.max_speed_rpm
     sp[L.SP_ACCEL] = p.max_accel_rad_s2
     sp[L.SP_STALL_PA] = p.stall_inlet_pa
+    r = sup.threshold_record  # the rest straight from the record the rules read
+    sp[L.SP_STALL_BAND], sp[L.SP_STALL_OMEGA] = r.stall_band_v, r.stall_omega
+    sp[L.SP_RAD_PER_COUNT], sp[L.SP_TH_HI], sp[L.SP_TH_LO] = r.rad_per_count, r.th_hi, r.th_lo
+    sp[L.SP_AHYST], sp[L.SP_ADECEL] = r.angle_hyst, r.max_decel_rad_s2
+    sp[L.SP_ROT_IDLE], sp[L.SP_ALAG] = r.rot_idle_v, r.angle_lag_s
     sp[L.SP_V_PER_PA], sp[L.SP_P_A] = scaling.v_per_pa, scaling.p_a
     sp[L.SP_V_PER_M], sp[L.SP_V_MID] = scaling.v_per_m, scaling.v_mid
     si[L.SI_T_NS], si[L.SI_WD_NS] = th["T_ns"], th["watchdog_ns"]
     si[L.SI_STUCK_NS], si[L.SI_STALL_NS] = th["stuck_ns"], th["stall_ns"]
     si[L.SI_NXW], si[L.SI_NCW] = th["velocity_window"], th["speed_window"]
     si[L.SI_CPR], si[L.SI_SLACK] = p.counts_per_rev, p.encoder_slack_counts
+    si[L.SI_REVERSE] = r.stall_reverse
 
 
 def pack_spec(spec: Any, sup: Any | None, scaling: Any | None) -> Packed:

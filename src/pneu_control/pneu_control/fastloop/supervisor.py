@@ -32,12 +32,16 @@ from pneu_control.fastloop.layout import (
     SI_CPR,
     SI_NCW,
     SI_NXW,
+    SI_REVERSE,
     SI_SLACK,
     SI_STALL_NS,
     SI_STUCK_NS,
     SI_T_NS,
     SI_WD_NS,
     SP_ACCEL,
+    SP_ADECEL,
+    SP_AHYST,
+    SP_ALAG,
     SP_DECEL,
     SP_HYST,
     SP_LHI,
@@ -48,7 +52,13 @@ from pneu_control.fastloop.layout import (
     SP_PMAX_C1,
     SP_PMAX_C2,
     SP_PMAX_M1,
+    SP_RAD_PER_COUNT,
+    SP_ROT_IDLE,
+    SP_STALL_BAND,
+    SP_STALL_OMEGA,
     SP_STALL_PA,
+    SP_TH_HI,
+    SP_TH_LO,
     SP_TOWARD,
     SP_X_ABS,
     SP_X_HI,
@@ -109,6 +119,16 @@ def _load(sp, si, sf, sn):
     r.max_speed_rpm = sp[SP_MAX_RPM]
     r.max_accel_rad_s2 = sp[SP_ACCEL]
     r.stall_inlet_pa = sp[SP_STALL_PA]
+    r.stall_band_v = sp[SP_STALL_BAND]
+    r.stall_omega = sp[SP_STALL_OMEGA]
+    r.stall_reverse = si[SI_REVERSE]
+    r.rad_per_count = sp[SP_RAD_PER_COUNT]
+    r.th_hi = sp[SP_TH_HI]
+    r.th_lo = sp[SP_TH_LO]
+    r.angle_hyst = sp[SP_AHYST]
+    r.max_decel_rad_s2 = sp[SP_ADECEL]
+    r.rot_idle_v = sp[SP_ROT_IDLE]
+    r.angle_lag_s = sp[SP_ALAG]
 
 
 @njit(**JIT)
@@ -142,7 +162,8 @@ def sup_command(sf, sn, axis, u, stamp):
 
 @njit(**JIT)
 def sup_outputs(sp, si, sf, sn, now):
-    """``outputs(now_ns)``: (linear, rotary) V after the watchdog, latches and soft limits."""
+    """``outputs(now_ns)``: (linear, rotary) V after the watchdog, latches and the stroke and
+    angle soft limits."""
     _load(sp, si, sf, sn)
     r = sf[0]
     late = rules.watchdog_faults(r, r, now)

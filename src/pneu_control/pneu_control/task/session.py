@@ -87,11 +87,7 @@ def prepare(
     base_plumbing = plumbing or getattr(plant.rotary, "plumbing", "paper")
     program = load_task(task_file, safety=safety, plant_plumbing=base_plumbing)
     effective = plumbing or program.plumbing or base_plumbing
-    if effective == "bidirectional":
-        # the stall rule reads the inlet (port A) pressure only: with the bidirectional plumbing
-        # an angle held against a load keeps both ports pressurised, which is no stall. Until the
-        # second port is sensed the rule is set out of reach (above any supply), and said so.
-        safety = with_updates(safety, {"stall_inlet_pa": 2.0e6})
+    safety = with_updates(safety, {"rotary_plumbing": effective})  # what the stall rule reads
     updates: dict[str, Any] = (
         {"rotary.plumbing": effective} if hasattr(plant.rotary, "plumbing") else {}
     )

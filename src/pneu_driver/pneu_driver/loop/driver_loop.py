@@ -48,7 +48,7 @@ from pneu_driver.daq.rig import RigParams
 from pneu_driver.daq.scaling import RawSample, Scaler
 from pneu_driver.loop.rt import enable_realtime
 from pneu_driver.loop.stats import LoopStats
-from pneu_driver.safety import SAFE_V, AxisStatus, SafetyEvent, SafetySupervisor
+from pneu_driver.safety import SAFE_V, AxisStatus, SafetyEvent, SafetySupervisor, check_plumbing
 
 __all__ = ["CommandSlot", "LoopStats", "DriverLoop"]
 
@@ -108,7 +108,8 @@ class DriverLoop:
     rig
         Loop rate, pacing, command deadline, tolerances, AO safe value.
     supervisor
-        Its sample time must be the loop period and its ``counts_per_rev`` the rig's.
+        Its sample time must be the loop period, its ``counts_per_rev`` and
+        ``rotary_plumbing`` the rig's.
     on_sample
         Called with each :class:`SensorSample` (publish it).
     on_events
@@ -147,6 +148,7 @@ class DriverLoop:
             raise ValueError(
                 f"safety counts_per_rev: {supervisor.params.counts_per_rev} refused; allowed: the rig's encoder counts per revolution {rig.encoder.counts_per_rev}"
             )
+        check_plumbing(supervisor.params, rig.rotary_plumbing, "the rig's rotary_plumbing")
         if rig.encoder.max_filtered_rpm < supervisor.params.max_speed_rpm:
             raise ValueError(
                 f"encoder.dig_filter: {rig.encoder.dig_filter!r} refused; allowed: a filter passing "

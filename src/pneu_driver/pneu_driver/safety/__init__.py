@@ -16,7 +16,7 @@ from pneu_driver.safety.events import (
     AxisStatus,
     SafetyEvent,
 )
-from pneu_driver.safety.params import SafetyParams, load_safety_params
+from pneu_driver.safety.params import SafetyParams, check_plumbing, load_safety_params
 from pneu_driver.safety.supervisor import SafetySupervisor
 
 __all__ = [
@@ -30,5 +30,6 @@ __all__ = [
     "SafetyEvent",
     "SafetyParams",
     "SafetySupervisor",
+    "check_plumbing",
     "load_safety_params",
 ]

@@ -9,7 +9,7 @@ from typing import Any
 from pneu_msgs_py.params.core import ParamError, from_dict, param, with_updates
 from pneu_msgs_py.params.yaml_file import load_yaml, located
 
-__all__ = ["SafetyParams", "load_safety_params"]
+__all__ = ["SafetyParams", "check_plumbing", "load_safety_params"]
 
 
 @dataclass(frozen=True)
@@ -145,24 +145,109 @@ class SafetyParams:
         hi=1.0e6,
         desc="a pressure above supply + margin is implausible",
     )
-    # dead encoder or blocked rotor
+    # angle soft limits (rotary axis): off by default (a free spindle may turn forever)
+    angle_limits: bool = param(
+        False,
+        desc="rotary soft limits on: a tool on a hose or a cable cannot turn forever",
+    )
+    angle_min_deg: float = param(
+        -3600.0,
+        unit="°",
+        lo=-1.0e6,
+        hi=1.0e6,
+        desc="lowest angle the tool on the motor tolerates (θ = 0 where the encoder count "
+        "started); the soft limit is angle_margin_deg inside it",
+        allowed="[-1e+06, 1e+06] °, less than angle_max_deg",
+    )
+    angle_max_deg: float = param(
+        3600.0,
+        unit="°",
+        lo=-1.0e6,
+        hi=1.0e6,
+        desc="highest angle the tool on the motor tolerates; the soft limit is "
+        "angle_margin_deg inside it",
+        allowed="[-1e+06, 1e+06] °, more than angle_min_deg",
+    )
+    angle_margin_deg: float = param(
+        30.0,
+        unit="°",
+        lo=-3600.0,
+        hi=3600.0,
+        desc="angle soft limit this far inside each end of [angle_min_deg, angle_max_deg]",
+    )
+    angle_hyst_deg: float = param(
+        1.0,
+        unit="°",
+        lo=0.0,
+        hi=90.0,
+        desc="leave the angle soft-limit zone only this far back inside it",
+    )
+    angle_lag_ms: float = param(
+        20.0,
+        unit="ms",
+        lo=0.0,
+        hi=1000.0,
+        desc="the motor turns on at its speed this long once held (transport delay, spool, the "
+        "chambers' trapped or venting air): the braking angle's ω·t_lag",
+    )
+    max_decel_rad_s2: float = param(
+        5000.0,
+        unit="rad/s^2",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0e6,
+        desc="motor deceleration once held, for the braking angle's ω²/(2a)",
+    )
+    # stalled rotation: driven, yet not turning (dead encoder or blocked rotor)
+    rotary_plumbing: str = param(
+        "paper",
+        choices=("paper", "bidirectional"),
+        desc="which valve #2 directions drive the motor: paper = above 5 V only (port B "
+        "vents); bidirectional = both (port 2 -> port B); must be the rig's rotary_plumbing "
+        "and the twin's rotary.plumbing",
+    )
+    stall_band_v: float = param(
+        0.3,
+        unit="V",
+        lo=0.0,
+        hi=4.5,
+        desc="paper plumbing: valve #2 above 5 V + this drives the motor (port B vents: the "
+        "inlet's pressure is the drive); inside it: holding, not driving",
+    )
+    stall_band_bidir_v: float = param(
+        1.0,
+        unit="V",
+        lo=0.0,
+        hi=4.5,
+        desc="bidirectional plumbing: valve #2 beyond 5 V ± this drives the motor either way "
+        "(port B's pressure is not measured: an angle held against friction may keep the "
+        "valve off centre with both chambers pressurised)",
+    )
     stall_inlet_pa: float = param(
         2.51325e5,
         unit="Pa",
         lo=1.0e5,
         hi=2.0e6,
-        desc="motor inlet pressure (absolute) above which the rotor must turn: 1.5 bar gauge, "
-        "over 2x the Coulomb level M_c/K = 0.128 N*m / 1.87e-6 m^3 = 68 kPa (paper Table 1, twin)",
+        desc="forward drive counts only with the inlet p_m1 (absolute) above this: 1.5 bar "
+        "gauge, over 2x the Coulomb level M_c/K = 0.128 N*m / 1.87e-6 m^3 = 68 kPa "
+        "(paper Table 1, twin); reverse drive: port B's pressure is not measured",
+    )
+    stall_speed_rpm: float = param(
+        5.0,
+        unit="rpm",
+        lo=0.0,
+        lo_open=True,
+        hi=1000.0,
+        desc="|motor speed| over speed_window_ms below this is not turning",
     )
     stall_ms: float = param(
-        20.0,
+        100.0,
         unit="ms",
         lo=0.0,
         lo_open=True,
         hi=1000.0,
-        desc="no encoder count for this long while the inlet is above stall_inlet_pa (a count "
-        "comes every 1.5 ms even at 10 rpm): "
-        "dead encoder or blocked rotor -> rotary safe",
+        desc="driven (valve beyond the band, and forward p_m1 above stall_inlet_pa) yet below "
+        "stall_speed_rpm for longer than this: dead encoder or blocked rotor -> rotary safe",
     )
     # frozen values and live voltage ranges
     stuck_ms: float = param(
@@ -191,8 +276,25 @@ class SafetyParams:
                 self.stroke_margin_m,
                 f"less than half the stroke ({self.stroke_m / 2:g} m)",
             )
+        if not self.angle_min_deg < self.angle_max_deg:
+            raise ParamError(
+                "angle_max_deg",
+                self.angle_max_deg,
+                f"more than angle_min_deg ({self.angle_min_deg:g} °), at most 1e+06 °",
+            )
+        half = (self.angle_max_deg - self.angle_min_deg) / 2.0
+        if self.angle_margin_deg >= half:
+            raise ParamError(
+                "angle_margin_deg",
+                self.angle_margin_deg,
+                f"less than half the angle range ({half:g} °)",
+            )
         if self.allow_unsafe:
             return
+        if self.angle_margin_deg < 0.0:
+            raise ParamError(
+                "angle_margin_deg", self.angle_margin_deg, "≥ 0 ° (or set allow_unsafe: true)"
+            )
         if self.stroke_margin_m < 0.0:
             raise ParamError(
                 "stroke_margin_m", self.stroke_margin_m, "≥ 0 m (or set allow_unsafe: true)"
@@ -225,6 +327,10 @@ class SafetyParams:
             )
         if self.position_margin_m < 0.0:
             out.append(f"position_margin_m={self.position_margin_m:g} m < 0")
+        if self.angle_margin_deg < 0.0:
+            out.append(
+                f"angle_margin_deg={self.angle_margin_deg:g} ° < 0: angle soft limit beyond the range"
+            )
         if self.pressure_margin_pa < 0.0:
             out.append(f"pressure_margin_pa={self.pressure_margin_pa:g} Pa < 0")
         if self.watchdog_ms > 1000.0:
@@ -234,6 +340,18 @@ class SafetyParams:
                 f"max_speed_rpm={self.max_speed_rpm:g} > rated_speed_rpm={self.rated_speed_rpm:g}"
             )
         return tuple(out)
+
+
+def check_plumbing(params: SafetyParams, plumbing: str, source: str) -> None:
+    """Refuse a supervisor whose ``rotary_plumbing`` is not the hardware's ``plumbing`` (named
+    by ``source``): the stall rule reads from it which valve directions drive the motor."""
+    if params.rotary_plumbing != plumbing:
+        raise ParamError(
+            "rotary_plumbing",
+            params.rotary_plumbing,
+            f"{plumbing!r}, {source} (config/safety.yaml: the stall rule must know which "
+            "valve directions drive the motor)",
+        )
 
 
 def load_safety_params(

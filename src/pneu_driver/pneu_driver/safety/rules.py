@@ -8,7 +8,8 @@ into numba callers) on three records:
   :class:`~pneu_driver.safety.params.SafetyParams` (:func:`thresholds`);
 - ``s``, :data:`STATE`: what the rules remember (the velocity and speed windows,
   the last encoder step, the frozen values and since when, the stall clock, the
-  soft-limit zones, the last command per axis, the pending refusals);
+  stroke and angle soft-limit zones, the last command and the last output per axis,
+  the pending refusals);
 - ``d``, :data:`FINDINGS`: the numbers behind a rule that fired this call (for
   the message), written only when it fires (``nf_fields``/``nf_volts`` always).
 
@@ -20,7 +21,12 @@ latches, acknowledge) and the compiled closed loop's adapter
 (:mod:`pneu_control.fastloop.supervisor`: latches as bits, the event flag).
 
 Axes are indices here: 0 linear, 1 rotary (``AXES`` order). Stamps are int ns.
-Each rule is "> threshold": a value exactly at it passes (``>=`` for the soft limit).
+Each rule is "> threshold": a value exactly at it passes (``>=`` for the soft limits).
+
+The rotary axis's direction: valve #2 above 5 V feeds motor port A and turns the motor
+toward +θ (encoder counts up), below 5 V toward −θ only with the bidirectional plumbing
+(port 2 on port B; with the paper's plumbing it vents the inlet): what every rotary
+controller assumes.
 """
 
 from __future__ import annotations
@@ -42,6 +48,8 @@ __all__ = [
     "STATE",
     "THRESHOLDS",
     "WINDOW_MAX",
+    "angle_faults",
+    "angle_zone",
     "command",
     "fresh_array",
     "jump_allowance",
@@ -49,6 +57,8 @@ __all__ = [
     "output_v",
     "sample_faults",
     "sensor_key_axes",
+    "stall_fault",
+    "stroke_zone",
     "thresholds",
     "update_zone",
     "watchdog_faults",
@@ -76,6 +86,7 @@ STUCK = 14  # stuck:<analog>, bits 14..17
 ENCODER_JUMP = 18  # encoder_jump:encoder
 OVERSPEED = 19  # overspeed (not a sensor fault: no sensor in its key)
 NO_ROTATION = 20  # no_rotation:encoder
+ANGLE_LIMIT = 21  # angle_limit:encoder (the motor at or beyond an angle soft limit)
 SENSOR_KEYS = (
     *(f"non_finite:{s}" for s in (*ANALOG, "encoder")),
     *(f"live_range:{s}" for s in ANALOG),
@@ -86,14 +97,16 @@ SENSOR_KEYS = (
     "encoder_jump:encoder",
     "overspeed",
     "no_rotation:encoder",
+    "angle_limit:encoder",
 )
 KEY_SENSOR = tuple(k.split(":")[1] if ":" in k else "encoder" for k in SENSOR_KEYS)
 KEY_AXIS = tuple(SENSOR_AXIS[s] for s in KEY_SENSOR)
 LINEAR_KEYS = sum(1 << i for i, a in enumerate(KEY_AXIS) if a == AXES[0])
 ROTARY_KEYS = sum(1 << i for i, a in enumerate(KEY_AXIS) if a == AXES[1])
 
-# what update_zone changed
+# what update_zone changed: the stroke soft limits, then the angle soft limits
 ZONE_HI_ENTERED, ZONE_HI_LEFT, ZONE_LO_ENTERED, ZONE_LO_LEFT = 1, 2, 4, 8
+ANGLE_HI_ENTERED, ANGLE_HI_LEFT, ANGLE_LO_ENTERED, ANGLE_LO_LEFT = 16, 32, 64, 128
 # what command did
 CMD_REFUSED = 1  # outside [U_MIN_V, U_MAX_V] or NaN: not taken, output_sanity present
 CMD_REFUSAL_GONE = 2  # a good command after a refused one: output_sanity gone
@@ -126,6 +139,16 @@ THRESHOLDS = RecordType(
         ("counts_per_rev", "i"),
         ("encoder_slack_counts", "i"),
         ("stall_inlet_pa", "f"),
+        ("stall_band_v", "f"),  # valve #2 beyond SAFE_V ± this drives the motor [V]
+        ("stall_omega", "f"),  # |speed| below this is not turning [rad/s]
+        ("stall_reverse", "i"),  # 1: below SAFE_V drives too (bidirectional plumbing)
+        ("rad_per_count", "f"),  # 2π / counts_per_rev
+        ("th_hi", "f"),  # angle soft limits [rad] (±inf: off)
+        ("th_lo", "f"),
+        ("angle_hyst", "f"),  # [rad]
+        ("angle_lag_s", "f"),
+        ("max_decel_rad_s2", "f"),
+        ("rot_idle_v", "f"),  # valve #2's output that does not turn the motor [V]
         ("n_xw", "i"),  # velocity window: samples held (periods + 1)
         ("n_cw", "i"),  # speed window: samples held
     ],
@@ -151,15 +174,18 @@ STATE = RecordType(
         ("enc_rate", "f", 0.0),
         ("frozen_v", ("f", 4), [math.nan] * 4),  # per analog channel: last value (NaN: fresh)
         ("frozen_t", ("i", 4)),  # and since when it holds it
-        ("stall_have", "i"),  # counts seen with the inlet high, and since when
-        ("stall_c", "i"),
+        ("w", "f", 0.0),  # motor speed over the speed window [rad/s]
+        ("stall_have", "i"),  # the stall clock runs: driven and not turning since stall_since
         ("stall_since", "i"),
-        ("zone_hi", "i"),  # soft-limit hold active
+        ("zone_hi", "i"),  # stroke soft-limit hold active
         ("zone_lo", "i"),
+        ("azone_hi", "i"),  # angle soft-limit hold active
+        ("azone_lo", "i"),
         ("cmd_have", ("i", 2)),  # per axis: a command accepted (0 after acknowledging a watchdog)
         ("cmd_u", ("f", 2)),
         ("cmd_t", ("i", 2)),
         ("refused", "i"),  # bit a: axis a's last command was refused (output_sanity present)
+        ("u_out", ("f", 2), [SAFE_V, SAFE_V]),  # per axis: the last output (held since) [V]
     ],
 )
 FINDINGS = RecordType(
@@ -173,6 +199,8 @@ FINDINGS = RecordType(
         ("jump_allowed", "f"),
         ("speed_rpm", "f"),  # overspeed
         ("braking_m", "f"),  # update_zone: v²/(2a)
+        ("braking_rad", "f"),  # update_zone: ω²/(2a)
+        ("stall_u", "f"),  # no_rotation: the valve voltage driving the motor
     ],
 )
 
@@ -193,6 +221,11 @@ def thresholds(params: Any, sample_time_s: float) -> Record:
             )
         windows.append(n + 1)
     lin = p.supply_linear_pa + p.pressure_margin_pa
+    both = p.rotary_plumbing == "bidirectional"
+    th_hi, th_lo = math.inf, -math.inf
+    if p.angle_limits:
+        th_hi = math.radians(p.angle_max_deg - p.angle_margin_deg)
+        th_lo = math.radians(p.angle_min_deg + p.angle_margin_deg)
     return THRESHOLDS.new(
         T_ns=round(sample_time_s * 1e9),
         watchdog_ns=round(p.watchdog_ms * 1e6),
@@ -216,6 +249,16 @@ def thresholds(params: Any, sample_time_s: float) -> Record:
         counts_per_rev=p.counts_per_rev,
         encoder_slack_counts=p.encoder_slack_counts,
         stall_inlet_pa=p.stall_inlet_pa,
+        stall_band_v=p.stall_band_bidir_v if both else p.stall_band_v,
+        stall_omega=p.stall_speed_rpm * _TWO_PI / 60.0,
+        stall_reverse=1 if both else 0,
+        rad_per_count=_TWO_PI / p.counts_per_rev,
+        th_hi=th_hi,
+        th_lo=th_lo,
+        angle_hyst=math.radians(p.angle_hyst_deg),
+        angle_lag_s=p.angle_lag_ms * 1e-3,
+        max_decel_rad_s2=p.max_decel_rad_s2,
+        rot_idle_v=SAFE_V if both else U_MIN_V,
         n_xw=windows[0],
         n_cw=windows[1],
     )
@@ -313,6 +356,16 @@ def position_faults(th, x):
 
 
 @kernel
+def angle_faults(th, c):
+    """The motor at or beyond an angle soft limit (counts ``c``; the hold did not stop it:
+    inertia, a load driving it on)."""
+    theta = c * th.rad_per_count
+    if theta >= th.th_hi or theta <= th.th_lo:
+        return 1 << ANGLE_LIMIT
+    return 0
+
+
+@kernel
 def frozen_faults(th, s, now, values):
     """An analog value (``values``: the raw volts, else the SI values) bit-identical for
     longer than ``stuck_ns``."""
@@ -363,7 +416,7 @@ def jump_allowance(th, dt_ns):
 @kernel
 def encoder_faults(th, s, d, now, c):
     """A count step deviating from the previous speed by more than :func:`jump_allowance`;
-    |speed| over the speed window above ``max_speed_rpm``."""
+    |speed| over the speed window above ``max_speed_rpm`` (``s.w``: that speed in rad/s)."""
     keys = 0
     has_rate = 0
     rate = 0.0
@@ -392,8 +445,10 @@ def encoder_faults(th, s, d, now, c):
     s.cw_t[j] = now
     s.cw_c[j] = c
     t0 = s.cw_t[o]
+    s.w = 0.0
     if now > t0:
         rpm = (c - s.cw_c[o]) * 60.0e9 / (th.counts_per_rev * (now - t0))
+        s.w = (c - s.cw_c[o]) * th.rad_per_count * 1e9 / (now - t0)
         if abs(rpm) > th.max_speed_rpm:
             keys |= 1 << OVERSPEED
             d.speed_rpm = rpm
@@ -401,15 +456,27 @@ def encoder_faults(th, s, d, now, c):
 
 
 @kernel
-def stall_fault(th, s, now, p_m1, c):
-    """Dead encoder / blocked rotor: the inlet able to turn the motor, yet no count for
-    ``stall_ns`` (what the jump rule cannot see: at low speed a missed count is allowed)."""
-    if not p_m1 > th.stall_inlet_pa or not s.stall_have or c != s.stall_c:
-        s.stall_have = 1
-        s.stall_c = c
+def stall_fault(th, s, d, now, p_m1):
+    """Dead encoder or blocked rotor: the motor driven, yet |speed| over the speed window
+    below ``stall_omega`` for longer than ``stall_ns``.
+
+    Driven: the valve held during the last period (``s.u_out[1]``) beyond SAFE_V ±
+    ``stall_band_v`` (the paper's or the bidirectional plumbing's band) toward a port that drives: forward (above) with the inlet p_m1 above
+    ``stall_inlet_pa`` (the torque is there), reverse (below) only with the bidirectional
+    plumbing and from the valve alone (port B's pressure p_m2 is not measured). Inside the
+    band (holding an angle, both chambers trapped) the clock does not run; a breakaway that
+    turns the motor within ``stall_ns`` restarts it.
+    """
+    du = s.u_out[1] - SAFE_V
+    driven = (du > th.stall_band_v and p_m1 > th.stall_inlet_pa) or (
+        th.stall_reverse != 0 and -du > th.stall_band_v
+    )
+    if not driven or abs(s.w) >= th.stall_omega or not s.stall_have:
+        s.stall_have = 1 if driven else 0
         s.stall_since = now
         return 0
     if now - s.stall_since > th.stall_ns:
+        d.stall_u = s.u_out[1]
         return 1 << NO_ROTATION
     return 0
 
@@ -429,7 +496,8 @@ def sample_faults(th, s, d, now, p_c1, p_c2, p_m1, x, c, values, have_volts):
     keys |= frozen_faults(th, s, now, values)
     track_velocity(th, s, now, x)
     keys |= encoder_faults(th, s, d, now, c)
-    keys |= stall_fault(th, s, now, p_m1, c)
+    keys |= angle_faults(th, c)
+    keys |= stall_fault(th, s, d, now, p_m1)
     s.have_sample = 1
     return keys
 
@@ -474,7 +542,7 @@ def watchdog_faults(th, s, now):
 
 
 @kernel
-def update_zone(th, s, d):
+def stroke_zone(th, s, d):
     """Stroke soft limits with the braking distance v²/(2a), hysteresis on leaving (not
     latched): what changed (``ZONE_*`` bits); ``d.braking_m`` when something did."""
     x = s.x
@@ -505,15 +573,66 @@ def update_zone(th, s, d):
 
 
 @kernel
+def angle_zone(th, s, d):
+    """Angle soft limits with the braking angle |ω| t_lag + ω²/(2a) (ω over the speed
+    window), as the stroke's: what changed (``ANGLE_*`` bits); ``d.braking_rad`` when
+    something did. The lag term: a held pneumatic motor turns on while its valve closes and
+    its chambers' air vents or is trapped (twin: ≈ ω · 10-19 ms at 5 V, 250-1700 rpm)."""
+    if not s.enc_have:
+        return 0
+    theta = s.enc_c * th.rad_per_count
+    w = s.w
+    b = abs(w) * th.angle_lag_s + w * w / (2.0 * th.max_decel_rad_s2)
+    reach_hi = theta + (b if w > 0.0 else 0.0)
+    reach_lo = theta - (b if w < 0.0 else 0.0)
+    if not (s.azone_hi or s.azone_lo) and th.th_lo < reach_lo and reach_hi < th.th_hi:
+        return 0  # hot path: far from both limits (always, with the limits off: ±inf)
+    out = 0
+    if not s.azone_hi and reach_hi >= th.th_hi:
+        s.azone_hi = 1
+        out |= ANGLE_HI_ENTERED
+    elif s.azone_hi and reach_hi < th.th_hi - th.angle_hyst:
+        s.azone_hi = 0
+        out |= ANGLE_HI_LEFT
+    if not s.azone_lo and reach_lo <= th.th_lo:
+        s.azone_lo = 1
+        out |= ANGLE_LO_ENTERED
+    elif s.azone_lo and reach_lo > th.th_lo + th.angle_hyst:
+        s.azone_lo = 0
+        out |= ANGLE_LO_LEFT
+    if out:
+        d.braking_rad = b
+    return out
+
+
+@kernel
+def update_zone(th, s, d):
+    """The stroke and angle soft-limit zones (:func:`stroke_zone`, :func:`angle_zone`):
+    what changed (``ZONE_*`` | ``ANGLE_*`` bits)."""
+    return stroke_zone(th, s, d) | angle_zone(th, s, d)
+
+
+@kernel
 def output_v(th, s, axis, blocked):
-    """The voltage to write for ``axis``: SAFE_V while ``blocked`` (a latched fault, the
-    e-stop), before its first command or the first sample; the linear axis's command
-    driving further into an active soft-limit zone is held at SAFE_V."""
-    if blocked or not s.cmd_have[axis] or not s.have_sample:
-        return SAFE_V
-    u = s.cmd_u[axis]
-    if axis == 0:
-        push = (u - SAFE_V) * th.u_toward_hi  # > 0: drives toward +x
-        if (s.zone_hi and push > 0.0) or (s.zone_lo and push < 0.0):
-            return SAFE_V
+    """The voltage to write for ``axis`` (kept in ``s.u_out``): SAFE_V while ``blocked`` (a
+    latched fault, the e-stop), before its first command or the first sample; a command
+    driving further into an active stroke soft-limit zone is held at SAFE_V.
+
+    The rotary axis in an active angle zone: no output turning further, SAFE_V included,
+    is written; it is held at ``rot_idle_v``, the output that does not drive the motor
+    (bidirectional: SAFE_V, both ports closed; paper: the inlet vented, U_MIN_V, because
+    the closed centre's leakage turns the motor on at 35-55 rpm on the nominal twin).
+    """
+    u = SAFE_V
+    if not blocked and s.cmd_have[axis] and s.have_sample:
+        u = s.cmd_u[axis]
+        if axis == 0:
+            push = (u - SAFE_V) * th.u_toward_hi  # > 0: drives toward +x
+            if (s.zone_hi and push > 0.0) or (s.zone_lo and push < 0.0):
+                u = SAFE_V
+    if axis == 1:
+        idle = th.rot_idle_v  # above: turns toward +θ (port A); below: toward −θ (port B)
+        if (s.azone_hi and u > idle) or (s.azone_lo and u < idle):
+            u = idle
+    s.u_out[axis] = u
     return u

@@ -5,11 +5,12 @@ per rig, stepped from one thread:
 
 1. ``check_sample(sample, raw_volts)`` -- plausibility of the new sample
    (NaN/inf, live voltage range, pressure above supply + margin, position
-   beyond the end stops, frozen values, impossible encoder jumps, overspeed);
+   beyond the end stops, frozen values, impossible encoder jumps, overspeed,
+   a stalled rotation, the stroke and angle soft-limit trips);
 2. ``command(axis, u, stamp_ns)`` -- a controller's command arrived; NaN or a
    value outside 0–10 V is refused (never written) and trips the axis;
 3. ``outputs(now_ns)`` -- the two voltages to write, after the watchdog, the
-   latched faults, the e-stop and the stroke soft limits.
+   latched faults, the e-stop and the stroke and angle soft limits.
 
 Faults latch per axis: the valve stays at its safe value (5 V, closed centre)
 until the condition is gone *and* :meth:`SafetySupervisor.acknowledge` (or
@@ -26,6 +27,19 @@ until the condition is gone *and* :meth:`SafetySupervisor.acknowledge` (or
   so the run reported OK). The trip makes that visible (exit code 3); it can
   be acknowledged while the piston is still out there, so a controller can
   retract it (the hold keeps refusing the other way).
+
+The angle soft limits (``angle_limits``, off by default) act the same way on the
+motor angle θ from the encoder counts, with the braking angle ω²/(2a): a hold of
+commands turning further (above 5 V toward +θ, below toward −θ) at 5 V, and a
+latched trip (``angle_limit``) at or beyond a soft limit, acknowledgeable out
+there so a controller can turn back.
+
+A stalled rotation (``no_rotation``): valve #2 held beyond 5 V ± ``stall_band_v``
+(``stall_band_bidir_v`` with the bidirectional plumbing) toward a port that drives the motor (forward with the inlet p_m1 above
+``stall_inlet_pa``; reverse only with the bidirectional plumbing, from the valve
+alone: port B is not measured) while |ω| over the speed window stays below
+``stall_speed_rpm`` for longer than ``stall_ms``: a blocked rotor or a dead
+encoder. Holding an angle (valve within the band) never runs its clock.
 
 Every transition is queued as a :class:`SafetyEvent` for ``/diagnostics`` and the
 bag (:meth:`~SafetySupervisor.events` drains them).
@@ -59,6 +73,12 @@ __all__ = ["SafetySupervisor"]
 _AXIS_INDEX = {axis: a for a, axis in enumerate(AXES)}
 _SANITY_GROUP = {axis: f"sanity:{axis}" for axis in AXES}
 _LIVE_KEYS = 15 << rules.LIVE_RANGE
+_STROKE_ZONE = (
+    rules.ZONE_HI_ENTERED | rules.ZONE_HI_LEFT | rules.ZONE_LO_ENTERED | rules.ZONE_LO_LEFT
+)
+_ANGLE_ZONE = (
+    rules.ANGLE_HI_ENTERED | rules.ANGLE_HI_LEFT | rules.ANGLE_LO_ENTERED | rules.ANGLE_LO_LEFT
+)
 
 
 def _fmt(v: Any) -> str:
@@ -124,7 +144,9 @@ class SafetySupervisor:
         - |x| > stroke/2 + ``position_margin_m`` → linear safe;
         - analog value bit-identical for > ``stuck_ms`` → its axis safe;
         - encoder step deviating from the previous speed by > a·Δt²·cpr/2π + slack counts → rotary safe;
-        - |speed| over ``speed_window_ms`` > ``max_speed_rpm`` → rotary safe.
+        - |speed| over ``speed_window_ms`` > ``max_speed_rpm`` → rotary safe;
+        - θ at or beyond an angle soft limit (``angle_limits`` on) → rotary safe;
+        - driven beyond the band yet below ``stall_speed_rpm`` for > ``stall_ms`` → rotary safe.
         """
         s = sample
         now = int(s.stamp_ns)
@@ -213,6 +235,15 @@ class SafetySupervisor:
                 x_m=x,
                 limit_m=th.x_hi if x > 0 else th.x_lo,
             )
+        if keys >> rules.ANGLE_LIMIT & 1:
+            deg = math.degrees(int(s.counts) * th.rad_per_count)
+            lo, hi = math.degrees(th.th_lo), math.degrees(th.th_hi)
+            flag(
+                rules.ANGLE_LIMIT,
+                f"motor at θ = {deg:.5g}°, at or beyond the angle soft limit [{lo:.6g}, {hi:.6g}]°",
+                theta_deg=deg,
+                limit_deg=hi if deg > 0 else lo,
+            )
         for i, sensor in enumerate(ANALOG):
             if keys >> (rules.STUCK + i) & 1:
                 v, frozen_ms = values[i], (now - st.frozen_t[i]) * 1e-6
@@ -244,11 +275,25 @@ class SafetySupervisor:
             )
         if keys >> rules.NO_ROTATION & 1:
             still_ms = (now - self._s.stall_since) * 1e-6
+            rpm = self._s.w * 60.0 / (2.0 * math.pi)
+            u = d.stall_u
+            if u > SAFE_V:
+                how = (
+                    f"driven forward: valve #2 at {u:.4g} V (> {SAFE_V:g} + {self._th.stall_band_v:g} V), "
+                    f"inlet p_m1 at {s.p_m1:.6g} Pa (> {p.stall_inlet_pa:g} Pa)"
+                )
+            else:
+                how = (
+                    f"driven in reverse: valve #2 at {u:.4g} V (< {SAFE_V:g} - {self._th.stall_band_v:g} V; "
+                    "port B's pressure not measured)"
+                )
             flag(
                 rules.NO_ROTATION,
-                f"no encoder count for {still_ms:.4g} ms with the motor "
-                f"inlet at {s.p_m1:.6g} Pa (> {p.stall_inlet_pa:g} Pa)",
+                f"rotation stalled: motor at {rpm:.3g} rpm (below {p.stall_speed_rpm:g} rpm) "
+                f"for {still_ms:.4g} ms (> {p.stall_ms:g} ms), {how}",
+                valve_v=u,
                 inlet_pa=s.p_m1,
+                speed_rpm=rpm,
                 still_ms=still_ms,
             )
 
@@ -315,6 +360,45 @@ class SafetySupervisor:
 
     def _zone_events(self, changed: int, now: int) -> None:
         """The soft-limit transitions :func:`rules.update_zone` reported, as events."""
+        if changed & _STROKE_ZONE:
+            self._stroke_events(changed, now)
+        if changed & _ANGLE_ZONE:
+            self._angle_events(changed, now)
+
+    def _angle_events(self, changed: int, now: int) -> None:
+        """The angle soft-limit transitions, as events."""
+        th, st = self._th, self._s
+        deg = math.degrees(st.enc_c * th.rad_per_count)
+        rpm = st.w * 60.0 / (2.0 * math.pi)
+        b_deg = math.degrees(self._d.braking_rad)
+        idle = th.rot_idle_v
+        for bound, entered, left, side in (
+            (th.th_hi, rules.ANGLE_HI_ENTERED, rules.ANGLE_HI_LEFT, "above"),
+            (th.th_lo, rules.ANGLE_LO_ENTERED, rules.ANGLE_LO_LEFT, "below"),
+        ):
+            limit = math.degrees(bound)
+            values = {"theta_deg": deg, "speed_rpm": rpm, "braking_deg": b_deg, "limit_deg": limit}
+            if changed & entered:
+                self._emit(
+                    "rotary",
+                    "soft_limit",
+                    WARN,
+                    f"angle soft limit: θ = {deg:.5g}°, braking {b_deg:.3g}° reaches {limit:.6g}°; outputs {side} {idle:g} V held at {idle:g} V",
+                    values,
+                    now,
+                )
+            elif changed & left:
+                self._emit(
+                    "rotary",
+                    "soft_limit",
+                    OK,
+                    f"angle soft limit released at θ = {deg:.5g}°",
+                    values,
+                    now,
+                )
+
+    def _stroke_events(self, changed: int, now: int) -> None:
+        """The stroke soft-limit transitions, as events."""
         th, st = self._th, self._s
         x, v, d_brake = st.x, st.v, self._d.braking_m
         for bound, entered, left, direction in (
@@ -391,7 +475,7 @@ class SafetySupervisor:
             f"{key} ({msg})"
             for group in self._groups.values()
             for (a, key), (msg, _v) in group.items()
-            if a == axis and key not in ("watchdog", "stroke_limit:x")
+            if a == axis and key not in ("watchdog", "stroke_limit:x", "angle_limit:encoder")
         ]
 
     def _clear_axis(self, axis: str) -> list[str]:
@@ -425,7 +509,12 @@ class SafetySupervisor:
             if not self._s.have_sample:
                 causes.append("no_sample")
             present = tuple(key for g in self._groups.values() for (a, key) in g if a == axis)
-            limited = axis == "linear" and bool(self._s.zone_hi or self._s.zone_lo)
+            zones = (
+                (self._s.zone_hi, self._s.zone_lo)
+                if axis == "linear"
+                else (self._s.azone_hi, self._s.azone_lo)
+            )
+            limited = bool(zones[0] or zones[1])
             state = "SAFE" if causes else ("LIMITED" if limited else "OK")
             out[axis] = AxisStatus(axis, state, tuple(causes), present)
         return out
@@ -452,6 +541,11 @@ class SafetySupervisor:
             "u_toward_hi": th.u_toward_hi,
             "velocity_window": th.n_xw,
             "speed_window": th.n_cw,
+            "theta_hi": th.th_hi,
+            "theta_lo": th.th_lo,
+            "stall_band_v": th.stall_band_v,
+            "stall_omega": th.stall_omega,
+            "stall_reverse": th.stall_reverse,
         }
 
     @property
@@ -473,6 +567,11 @@ class SafetySupervisor:
     def soft_limits(self) -> tuple[float, float]:
         """(x_lo, x_hi) [m]: the soft-limit boundaries inside the end stops."""
         return self._th.x_lo, self._th.x_hi
+
+    @property
+    def angle_soft_limits(self) -> tuple[float, float]:
+        """(θ_lo, θ_hi) [rad]: the angle soft limits (±inf while ``angle_limits`` is off)."""
+        return self._th.th_lo, self._th.th_hi
 
     # ----------------------------------------------------------------- internal
     def _update_group(

@@ -77,6 +77,11 @@ class RigCycle:
         for axis in axes:
             if axis not in AXES:
                 raise ParamError("axes", axis, "one of " + ", ".join(AXES))
+        safety = getattr(supervisor, "params", None)
+        if safety is not None and hasattr(plant, "params"):
+            from pneu_driver.safety import check_plumbing
+
+            check_plumbing(safety, plant.params.rotary.plumbing, "the twin's rotary.plumbing")
         self.plant = plant
         self.axes = tuple(axes)
         self.mode = mode
