@@ -29,7 +29,7 @@ def test_skipped_ticks_never_step_past_the_last_sample():
     for late, n_end in ((3, 50), (7, 50), (49, 50), (120, 50)):
         cycle = RigCycle(Plant(load_plant(None), seed=0), axes=())
         published = []
-        loop = SimLoop(cycle, on_sample=lambda s: published.append(s.k), n_end=n_end)
+        loop = SimLoop(cycle, on_sample=lambda s, out=published: out.append(s.k), n_end=n_end)
         loop.pacer = _LatePacer(late)
         loop.run()
         assert loop.error is None
