@@ -31,6 +31,7 @@ __all__ = [
     "MISSING",
     "ParamError",
     "ParamSpec",
+    "shown",
     "param",
     "validate",
     "from_dict",
@@ -51,10 +52,30 @@ class _Missing:
 MISSING = _Missing()
 
 
+SHOWN_CHARS = 200  # a refused value is shown up to this long (a path fits): one short line
+
+
+def shown(value: Any) -> str:
+    """``value`` as a refusal shows it: its repr, a mapping or list by its size and first
+    keys (never a whole YAML tree), long text cut to :data:`SHOWN_CHARS` characters."""
+    if isinstance(value, Mapping):
+        keys = ", ".join(str(k) for k in list(value)[:4]) + (", ..." if len(value) > 4 else "")
+        text = f"a mapping ({len(value)} key{'s' * (len(value) != 1)}: {keys})"
+    elif isinstance(value, (list, tuple)) and len(repr(value)) > SHOWN_CHARS:
+        text = f"a list of {len(value)} items"
+    else:
+        text = repr(value)
+    if len(text) > SHOWN_CHARS:
+        quote = text[0] if text[0] in "'\"" else ""
+        text = text[: SHOWN_CHARS - 4] + "..." + quote
+    return text
+
+
 class ParamError(ValueError):
     """A parameter value was refused; the message names the key, value and range.
 
     ``value`` :data:`MISSING`: the key is required and absent (``key: missing; required: ...``).
+    The value is shown short (:func:`shown`): one line, whatever was refused.
     """
 
     def __init__(self, key: str, value: Any, allowed: str):
@@ -64,7 +85,7 @@ class ParamError(ValueError):
         if value is MISSING:
             super().__init__(f"{key}: missing; required: {allowed}")
         else:
-            super().__init__(f"{key}: {value!r} refused; allowed: {allowed}")
+            super().__init__(f"{key}: {shown(value)} refused; allowed: {allowed}")
 
 
 def param(
