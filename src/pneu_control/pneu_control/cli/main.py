@@ -57,6 +57,16 @@ class _Parser(argparse.ArgumentParser):
             f"{self.prog}: error: {_one_line(message)} (see {self.prog} --help)\n",
         )
 
+    def _get_values(self, action, arg_strings):
+        # an empty value is never meant: '' as --out would be '.', as --plant the default file,
+        # as --reference the file's reference (docs/cli.md: an option given is never empty)
+        own = action.nargs not in (argparse.PARSER, argparse.REMAINDER)  # not a subcommand's
+        for text in arg_strings if own and isinstance(arg_strings, list) else ():
+            if isinstance(text, str) and not text.strip():
+                name = "/".join(action.option_strings) or action.metavar or action.dest
+                self.error(f"argument {name}: {text!r} refused; allowed: a value that is not empty")
+        return super()._get_values(action, arg_strings)
+
 
 def _available() -> list[tuple[str, object]]:
     mods = []
@@ -100,9 +110,12 @@ def main(argv: list[str] | None = None, *, restore_signals: bool = True) -> int:
     ``restore_signals`` False (the ``pneu`` process itself): after the command, signals
     stay recorded-only, so one arriving while the interpreter shuts down changes nothing.
     """
+    from pneu_msgs_py.lifecycle import inputs
+
     restore = signals.install()  # first: a signal at any moment from here on ends cleanly
     try:
-        return _main(argv)
+        with inputs.tracking():  # every file the command reads: never one of its outputs
+            return _main(argv)
     except signals.Interrupted as err:  # during argument parsing or set-up
         print(f"pneu: interrupted by {signals.signal_name(err.signum)}", file=sys.stderr)
         return exits.interrupted_code(err.signum)
@@ -167,7 +180,7 @@ def _classify(err: Exception) -> tuple[int, str]:
     from pneu_msgs_py.live.errors import LiveError
     from pneu_msgs_py.params.core import ParamError
 
-    if isinstance(err, BagWriteError):
+    if isinstance(err, (BagWriteError, exits.CommandFailed)):
         return exits.RUNTIME_ERROR, str(err)
     if isinstance(err, (ParamError, BagError, LiveError, UserError)):
         return exits.BAD_INPUT, str(err)

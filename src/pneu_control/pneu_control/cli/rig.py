@@ -70,11 +70,12 @@ def parse_hold(text: str) -> dict[str, float]:
 
     if not text:
         return {}
-    _, values = parse_spec("hold:" + text, "--hold")
+    try:
+        _, values = parse_spec("hold:" + text, "--hold", keys=AXES)
+    except ParamError as err:  # named as the user wrote it (no "hold:" kind of theirs)
+        raise ParamError("--hold", err.value, err.allowed) from None
     out = {}
     for axis, v in values.items():
-        if axis not in AXES:
-            raise ParamError("--hold", axis, "one of " + ", ".join(AXES))
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not U_MIN_V <= v <= U_MAX_V:
             raise ParamError(f"--hold {axis}", v, f"[{U_MIN_V:g}, {U_MAX_V:g}] V")
         out[axis] = float(v)

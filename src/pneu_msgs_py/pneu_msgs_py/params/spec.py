@@ -7,6 +7,7 @@ arguments; ``--set KEY=VALUE`` values are read like the values here.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from typing import Any
 
 from pneu_msgs_py.params.core import ParamError
@@ -24,8 +25,11 @@ def parse_value(text: str) -> Any:
     return read_scalar(text)
 
 
-def parse_spec(text: str, field: str) -> tuple[str, dict[str, Any]]:
-    """``KIND[:key=value,...]`` -> ``(KIND, {key: value})``; ``field`` names the option in errors.
+def parse_spec(
+    text: str, field: str, keys: Collection[str] | None = None
+) -> tuple[str, dict[str, Any]]:
+    """``KIND[:key=value,...]`` -> ``(KIND, {key: value})``; ``field`` names the option in errors;
+    ``keys``: the only keys allowed (None: any, checked by the caller).
 
     Refused with one :class:`ParamError` line: an empty kind, an item without
     ``=`` or without a key, a key given twice, and a key ``kind`` (the kind is the
@@ -43,6 +47,8 @@ def parse_spec(text: str, field: str) -> tuple[str, dict[str, Any]]:
             raise ParamError(f"{field} {kind}", part, "key=value")
         if key in out:
             raise ParamError(f"{field} {kind}", key, "each key once")
+        if keys is not None and key not in keys:
+            raise ParamError(f"{field} {kind}", key, "one of " + ", ".join(keys))
         if key == "kind":
             raise ParamError(
                 f"{field} {kind}", part, f"no key 'kind': the kind is written before ':' ({kind})"

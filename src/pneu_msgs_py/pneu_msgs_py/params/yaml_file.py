@@ -186,15 +186,15 @@ def load_yaml(path: str | os.PathLike) -> Any:
     """Parse ``path`` strictly (see the module docstring); ``None`` for an empty file.
 
     Raises :class:`ConfigFileError` (a :class:`ParamError`) for a missing or
-    unreadable file, text that is not UTF-8, a syntax error or a duplicate key.
+    unreadable file, a directory, device or pipe, a file over 64 MiB, text that is not UTF-8, a syntax error or a duplicate key.
     """
+    from pneu_msgs_py.lifecycle.inputs import UnreadableInput, read_input
+
     p = Path(path)
     try:
-        text = p.read_bytes()
-    except IsADirectoryError:
-        raise ConfigFileError(p, "is a directory, not a YAML file") from None
-    except OSError as err:
-        raise ConfigFileError(p, f"cannot read: {err.strerror or err}") from None
+        text = read_input(p)  # a regular file of bounded size, remembered as an input
+    except UnreadableInput as err:
+        raise ConfigFileError(p, err.problem) from None
     try:
         decoded = text.decode("utf-8")
     except UnicodeDecodeError as err:
