@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None, *, restore_signals: bool = True) -> int:
     ``restore_signals`` False (the ``pneu`` process itself): after the command, signals
     stay recorded-only, so one arriving while the interpreter shuts down changes nothing.
     """
-    from pneu_msgs_py.lifecycle import inputs
+    from pneu_msgs_py.params import inputs
 
     restore = signals.install()  # first: a signal at any moment from here on ends cleanly
     try:

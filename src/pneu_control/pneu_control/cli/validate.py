@@ -66,16 +66,8 @@ def _figure(i: int, bag: str) -> str:
     return f"validate_{i:02d}_{Path(bag).parent.name}.png"
 
 
-def run(args: argparse.Namespace) -> int:
-    """``pneu validate``: replay each bag through the twin, write the report and overlays; the exit
-    code."""
-    from pneu_sim.physics.plant_file import load_plant
-
-    from pneu_control.cli.identify import resolve_bags
-    from pneu_control.sysid.record import load_record
-    from pneu_control.sysid.validate import plot_validation, validate_record, write_report
-
-    # everything checked before anything is written: options, the output, the plant file
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse a --horizon or --min-fit outside its range."""
     if not (args.horizon == math.inf or MIN_HORIZON_S <= args.horizon <= MAX_DURATION_S):
         raise ParamError(
             "--horizon",
@@ -87,6 +79,42 @@ def run(args: argparse.Namespace) -> int:
         raise ParamError(
             "--min-fit", args.min_fit, "a finite percentage <= 100 (a fit is at most 100 %)"
         )
+
+
+def _validation(bag: str, plant, used: set[str], args: argparse.Namespace):
+    """The validation of one bag; refused (before anything is written) if nothing of it
+    could be compared."""
+    from pneu_control.sysid.record import load_record
+    from pneu_control.sysid.validate import validate_record
+
+    rec = load_record(bag)
+    held = str(Path(rec.path).resolve()) not in used
+    v = validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
+    if not v.fits:  # refused before anything is written: nothing of it could be compared
+        raise ParamError(
+            "BAG",
+            bag,
+            f"a bag with a stretch to compare (mode {v.mode}: none here, "
+            + ("; ".join(rec.notes) or "too few valid samples")
+            + (
+                "); try --horizon S (restart from the measured state every S s)"
+                if math.isinf(args.horizon) and v.mode == "open"
+                else ")"
+            ),
+        )
+    return v
+
+
+def run(args: argparse.Namespace) -> int:
+    """``pneu validate``: replay each bag through the twin, write the report and overlays; the exit
+    code."""
+    from pneu_sim.physics.plant_file import load_plant
+
+    from pneu_control.cli.identify import resolve_bags
+    from pneu_control.sysid.validate import plot_validation, write_report
+
+    # everything checked before anything is written: options, the output, the plant file
+    _check_options(args)
     bags = resolve_bags(args.bags)
     claim = None
     if args.out:
@@ -97,24 +125,7 @@ def run(args: argparse.Namespace) -> int:
     with from_option("--plant" if args.plant else None):
         plant = load_plant(args.plant)
     used = _used_by_identify(args.plant)
-    results = []
-    for bag in bags:
-        rec = load_record(bag)
-        held = str(Path(rec.path).resolve()) not in used
-        v = validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
-        if not v.fits:  # refused before anything is written: nothing of it could be compared
-            raise ParamError(
-                "BAG",
-                bag,
-                f"a bag with a stretch to compare (mode {v.mode}: none here, "
-                + ("; ".join(rec.notes) or "too few valid samples")
-                + (
-                    "); try --horizon S (restart from the measured state every S s)"
-                    if math.isinf(args.horizon) and v.mode == "open"
-                    else ")"
-                ),
-            )
-        results.append(v)
+    results = [_validation(bag, plant, used, args) for bag in bags]
     if claim is not None:
         with claim, signals.deferred():  # every file finished, whatever signal comes
             for i, (v, bag) in enumerate(zip(results, bags)):

@@ -334,7 +334,7 @@ def load_waypoints(
                 key, file, "YAML list of [t, value], {points: ...} or {t: [...], value: [...]}"
             )
     else:
-        from pneu_msgs_py.lifecycle.inputs import UnreadableInput, read_input
+        from pneu_msgs_py.params.inputs import UnreadableInput, read_input
 
         try:
             raw = read_input(path)  # a regular file of bounded size, remembered as an input

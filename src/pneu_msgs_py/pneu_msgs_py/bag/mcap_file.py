@@ -121,7 +121,7 @@ class McapFile:
         os.set_blocking(fd, True)
         self._f = os.fdopen(fd, "rb")
         self.size = st.st_size
-        from pneu_msgs_py.lifecycle.inputs import note_input
+        from pneu_msgs_py.params.inputs import note_input
 
         note_input(self.path, st)  # no output of the command may replace it
         self.schemas: dict[int, M.Schema] = {}

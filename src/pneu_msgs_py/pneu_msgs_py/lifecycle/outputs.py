@@ -23,7 +23,7 @@ The rules (every command that writes follows them, docs/cli.md repeats them):
    a pipe, a directory): ``--overwrite`` replaces a file pneu could have written,
    nothing else. So a long command (a fit, a sweep) never finds out at its end.
 6. **Never an input.** Besides the inputs a command names, every file it has read
-   (:mod:`.inputs`: config files, waypoint tables, bags, tasks) is refused as an
+   (:mod:`pneu_msgs_py.params.inputs`: config files, waypoint tables, bags, tasks) is refused as an
    output, by identity (a link or another spelling is the same file).
 """
 
@@ -34,8 +34,8 @@ import stat
 from collections.abc import Iterable
 from pathlib import Path
 
-from pneu_msgs_py.lifecycle.inputs import is_input
 from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.inputs import is_input
 
 __all__ = ["LOCK_NAME", "MIN_FREE_BYTES", "PARTIAL", "OutputDir", "OutputFile", "is_same_path"]
 

@@ -188,7 +188,7 @@ def load_yaml(path: str | os.PathLike) -> Any:
     Raises :class:`ConfigFileError` (a :class:`ParamError`) for a missing or
     unreadable file, a directory, device or pipe, a file over 64 MiB, text that is not UTF-8, a syntax error or a duplicate key.
     """
-    from pneu_msgs_py.lifecycle.inputs import UnreadableInput, read_input
+    from pneu_msgs_py.params.inputs import UnreadableInput, read_input
 
     p = Path(path)
     try:

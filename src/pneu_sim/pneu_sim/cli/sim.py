@@ -147,6 +147,17 @@ def simulate(
     return rows[:m]
 
 
+def _write_csv(path: Path, rows, marker: str) -> None:
+    """``rows`` as CSV; ``marker`` (an interruption) as the last line, a ``#`` comment
+    (numpy's loadtxt and pandas' ``comment="#"`` skip it)."""
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(CSV_COLUMNS)
+        w.writerows([*r[:9].tolist(), int(r[9]), *r[10:].tolist()] for r in rows)
+        if marker:
+            fh.write(f"# {marker}: the rows above are what ran\n")
+
+
 def _plot(rows, path: Path, title: str) -> None:
     import matplotlib
 
@@ -212,12 +223,7 @@ def run(args: argparse.Namespace) -> int:
                 if stopped is not None
                 else ""
             )
-            with open(claim.partial("sim.csv"), "w", newline="", encoding="utf-8") as fh:
-                w = csv.writer(fh)
-                w.writerow(CSV_COLUMNS)
-                w.writerows([*r[:9].tolist(), int(r[9]), *r[10:].tolist()] for r in rows)
-                if marker:  # the last line says so (numpy and pandas' comment="#" skip it)
-                    fh.write(f"# {marker}: the rows above are what ran\n")
+            _write_csv(claim.partial("sim.csv"), rows, marker)
             claim.publish("sim.csv")
             if not args.no_plot:
                 title = (

@@ -118,7 +118,7 @@ class CardRegister:
                 str(path),
                 f"a new file or the card file of an earlier run ({why}: never overwritten)",
             )
-        from pneu_msgs_py.lifecycle.inputs import is_input
+        from pneu_msgs_py.params.inputs import is_input
 
         if is_input(path):
             raise ParamError("backend sim card", str(path), "a file that is not an input")

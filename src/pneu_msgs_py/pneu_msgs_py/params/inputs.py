@@ -1,4 +1,4 @@
-"""Every file a command reads: a regular file of bounded size, remembered so no output replaces it.
+"""The files a command reads: each a regular file of bounded size, remembered so no output replaces it.
 
 - :func:`read_input` reads a text input (a config file, a waypoint table, a task):
   a regular file only (a device such as ``/dev/zero`` would never end, a pipe
@@ -7,7 +7,7 @@
 - :func:`note_input` remembers a file the command read (bags note theirs too);
   :func:`is_input` answers whether a path is one of them, by the file's identity
   (device and inode: a link or another spelling of the path is the same file).
-  The output claims (:mod:`.outputs`) refuse to replace or remove any of them, so
+  The output claims (:mod:`pneu_msgs_py.lifecycle.outputs`) refuse to replace or remove any of them, so
   ``--overwrite`` never deletes an input, whichever option named it.
 
 The record is kept only while a command runs (:func:`tracking`, entered by
