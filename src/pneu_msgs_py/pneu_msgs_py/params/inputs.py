@@ -90,12 +90,13 @@ def read_input(path: str | os.PathLike, max_bytes: int = MAX_TEXT_BYTES) -> byte
         raise UnreadableInput(path, "is a directory, not a file") from None
     except OSError as err:
         raise UnreadableInput(path, f"cannot read: {err.strerror or err}") from None
-    with os.fdopen(fd, "rb") as fh:
-        st = os.fstat(fd)
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode):
+        os.close(fd)
         if stat.S_ISDIR(st.st_mode):
             raise UnreadableInput(path, "is a directory, not a file")
-        if not stat.S_ISREG(st.st_mode):
-            raise UnreadableInput(path, "not a regular file (a device, pipe or socket)")
+        raise UnreadableInput(path, "not a regular file (a device, pipe or socket)")
+    with os.fdopen(fd, "rb") as fh:
         if st.st_size > max_bytes:
             raise UnreadableInput(
                 path, f"{st.st_size} bytes; allowed: at most {max_bytes} bytes for this input"
