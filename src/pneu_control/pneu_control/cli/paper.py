@@ -204,7 +204,12 @@ def _run(args, claim: OutputDir, plant, cfg: Path, experiments) -> int:
         _figures(claim, experiments, results)
     band_md = ""
     if args.uncertainty:
-        band_md = _uncertainty(args, rows, experiments, cfg, out)
+        try:
+            band_md = _uncertainty(args, rows, experiments, cfg, out)
+        except signals.Interrupted as err:  # the nominal table is complete: it says the rest is not
+            with signals.deferred():
+                _mark_interrupted(out, args.uncertainty, err.signum)
+            raise
     print()
     print(paper.render_markdown(rows))
     if band_md:
@@ -256,18 +261,13 @@ def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
         f"({len(plan.factors)} factors) on {args.executor}",
         file=sys.stderr,
     )
-    try:
-        result = run_plan(plan, args, "pneu paper --uncertainty", "uncertainty")
-    except signals.Interrupted as err:  # the nominal table is complete; it says the rest is not
-        with signals.deferred():
-            _mark_interrupted(out, args.uncertainty, len(plan.tasks), err.signum)
-        raise
+    result = run_plan(plan, args, "pneu paper --uncertainty", "uncertainty")
     nominal = {(r.id, r.controller, r.gains): (r.e_max, r.rmse) for r in rows}
     with signals.deferred():
         return _write_uncertainty(args, result, out, nominal, len(plan.tasks))
 
 
-def _mark_interrupted(out: Path, samples: int, n_tasks: int, signum: int) -> None:
+def _mark_interrupted(out: Path, samples: int, signum: int) -> None:
     """paper_table.json (``uncertainty``: status interrupted, the signal, when) and
     paper_table.md (a last section) say the band stage was interrupted; no band table."""
     import json
@@ -279,11 +279,10 @@ def _mark_interrupted(out: Path, samples: int, n_tasks: int, signum: int) -> Non
         "signal": name,
         "interrupted_utc": signals.pending_since(),
         "samples": samples,
-        "runs": n_tasks,
     }
     text = (
         f"\n## Over {samples} plant samples: interrupted\n\n"
-        f"Interrupted by {name} while its {n_tasks} runs executed: no band table. "
+        f"Interrupted by {name} before its runs finished: no band table. "
         "The nominal table above is complete.\n"
     )
     md, js = out / "paper_table.md", out / "paper_table.json"
