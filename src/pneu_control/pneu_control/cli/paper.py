@@ -248,6 +248,7 @@ def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
     from pneu_control.cli.sweep import run_plan
     from pneu_control.sweep.engine import plan_sweep
 
+    signals.raise_if_pending()  # one recorded while the table or figures were written
     plan = plan_sweep(
         samples=args.uncertainty,
         seed=args.seed,

@@ -95,7 +95,7 @@ def _validation(bag: str, plant, used: set[str], args: argparse.Namespace):
             "BAG",
             bag,
             f"a bag with a stretch to compare (mode {v.mode}: none here, "
-            + ("; ".join(rec.notes) or "too few valid samples")
+            + (next((n for n in rec.notes if "not used" in n), "") or "too few valid samples")
             + (
                 "); try --horizon S (restart from the measured state every S s)"
                 if math.isinf(args.horizon) and v.mode == "open"
