@@ -85,11 +85,13 @@ def parse_hold(text: str) -> dict[str, float]:
 def run(args: argparse.Namespace) -> int:
     """``pneu rig``: the controllers in the driver's loop on ``--backend`` until the duration or a
     signal; the exit code."""
+    from pneu_driver.daq.backends import check_backend
     from pneu_driver.daq.rig import load_rig_params
 
     from pneu_control.experiment.rig_run import rig_dir, run_rig
 
     # everything checked before anything is written: options, the output, every file
+    check_backend(args.backend)
     until_stopped = args.duration == 0
     duration_s = MAX_DURATION_S if until_stopped else check_duration(args.duration)
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)

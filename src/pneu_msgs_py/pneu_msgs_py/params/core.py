@@ -23,7 +23,7 @@ import functools
 import math
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +32,7 @@ __all__ = [
     "ParamError",
     "ParamSpec",
     "shown",
+    "unknown_key",
     "param",
     "validate",
     "from_dict",
@@ -69,6 +70,20 @@ def shown(value: Any) -> str:
         quote = text[0] if text[0] in "'\"" else ""
         text = text[: SHOWN_CHARS - 4] + "..." + quote
     return text
+
+
+def unknown_key(key: Any, known: Iterable[str], shown_names: int = 10) -> str:
+    """The ``allowed`` text for an unknown key: the close names first, then the known ones
+    (at most ``shown_names`` of them, the count said): one short line for any group."""
+    import difflib
+
+    known = list(known)
+    close = difflib.get_close_matches(str(key), known, n=3, cutoff=0.6)
+    listed = ", ".join(known[:shown_names]) + (
+        f", ... ({len(known)} in all)" if len(known) > shown_names else ""
+    )
+    hint = f"; did you mean {' or '.join(close)}?" if close else ""
+    return f"no such parameter{hint}; known: {listed}"
 
 
 class ParamError(ValueError):
@@ -269,9 +284,7 @@ def from_dict(cls: type, data: Mapping[str, Any], *, strict: bool = True, prefix
     names = {f.name: f for f in dataclasses.fields(cls)}
     for key in data:
         if key not in names:
-            raise ParamError(
-                f"{prefix}{key}", data[key], "no such parameter; known: " + ", ".join(names)
-            )
+            raise ParamError(f"{prefix}{key}", data[key], unknown_key(key, names))
     kwargs: dict[str, Any] = {}
     for name, f in names.items():
         key = f"{prefix}{name}"

@@ -203,14 +203,9 @@ _TYPE_NAMES = {int: "an integer", float: "a number", str: "a string"}
 SEED_MAX = 2**32 - 1  # numpy's SeedSequence takes it whole (as every pneu --seed)
 
 
-def make_backend(rig: RigParams, **options: Any) -> TwinDaq:
-    """``backend: sim[:seed=0,plant=...,card=...,stall_at_s=...,stall_ms=...]`` (entry point).
-
-    Unknown or mistyped options are refused with one line naming them.
-    """
-    from pneu_sim.physics.plant import Plant
-    from pneu_sim.physics.plant_file import load_plant
-
+def check_options(**options: Any) -> dict[str, Any]:
+    """Every option of ``sim[:...]`` with its default, checked: an unknown, mistyped or
+    out-of-range one is refused with one line naming it (nothing is opened)."""
     values: dict[str, Any] = {}
     for key, value in options.items():
         if key not in OPTIONS:
@@ -235,7 +230,27 @@ def make_backend(rig: RigParams, **options: Any) -> TwinDaq:
         raise ParamError(
             "backend sim stall_ms", opt["stall_ms"], f"(0, {cap * 1e3:g}] ms (the duration cap)"
         )
+    if opt["plant"]:  # read (strictly) now: refused before anything is opened
+        from pneu_msgs_py.params.yaml_file import from_option
+
+        from pneu_sim.physics.plant_file import load_plant
+
+        with from_option("backend sim plant"):
+            load_plant(opt["plant"])
+    return opt
+
+
+def make_backend(rig: RigParams, **options: Any) -> TwinDaq:
+    """``backend: sim[:seed=0,plant=...,card=...,stall_at_s=...,stall_ms=...]`` (entry point;
+    its options checked by :func:`check_options`, also before anything is opened)."""
+    from pneu_sim.physics.plant import Plant
+    from pneu_sim.physics.plant_file import load_plant
+
+    opt = check_options(**options)
     plant = Plant(load_plant(opt["plant"] or None), seed=opt["seed"])
     stalls = [(opt["stall_at_s"], opt["stall_ms"] * 1e-3)] if opt["stall_at_s"] >= 0.0 else []
     card = CardRegister(opt["card"] or None)
     return TwinDaq(rig, plant, card=card, stalls=stalls)
+
+
+make_backend.check_options = check_options  # pneu_driver.daq.backends.check_backend
