@@ -72,16 +72,19 @@ def shown(value: Any) -> str:
     return text
 
 
-def unknown_key(key: Any, known: Iterable[str], shown_names: int = 10) -> str:
+def unknown_key(key: Any, known: Iterable[str], shown_chars: int = 80) -> str:
     """The ``allowed`` text for an unknown key: the close names first, then the known ones
-    (at most ``shown_names`` of them, the count said): one short line for any group."""
+    (as many as fit in ``shown_chars``, the count said): one short line for any group."""
     import difflib
 
     known = list(known)
     close = difflib.get_close_matches(str(key), known, n=3, cutoff=0.6)
-    listed = ", ".join(known[:shown_names]) + (
-        f", ... ({len(known)} in all)" if len(known) > shown_names else ""
-    )
+    names: list[str] = []
+    for name in known:
+        if names and len(", ".join([*names, name])) > shown_chars:
+            break
+        names.append(name)
+    listed = ", ".join(names) + (f", ... ({len(known)} in all)" if len(names) < len(known) else "")
     hint = f"; did you mean {' or '.join(close)}?" if close else ""
     return f"no such parameter{hint}; known: {listed}"
 
