@@ -36,7 +36,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from pneu_control.cli.main import main
 from pneu_msgs_py.params.paths import config_file
@@ -423,5 +423,130 @@ def test_generated_config_values(name):
             if rc == 2:
                 err = invoke(argv)[2]
                 assert str(path) in err  # the file is named, with line:col where known
+
+    prop()
+
+
+# ------------------------------------------------------ environment oddities
+ODDITIES = ("stdout_closed", "stdout_pipe_closed", "home_unset", "lang_c")
+LOCATIONS = ("plain", "spaces_non_ascii", "under_a_file", "read_only", "full")
+# (argv before the output, output option and name, what a complete output holds)
+ENV_COMMANDS = {
+    "run": (["run", "--axis", "linear", "--controller", "pid", "--duration", "0.05"],
+            "--out", "o", ("run.mcap", "metrics.json", "timeseries.npz")),
+    "sim": (["sim", "--duration", "0.05"], "--out", "o", ("sim.csv", "sim.png")),
+    "recover": (["recover", "{bag}"], "--out", "new.mcap", ()),
+    "plot": (["plot", "{bag}"], "--out", "fig.png", ()),
+    "refused": (["run", "--duration", "0", "--plant", "{plant}"], "--out", "o", ()),
+}  # fmt: skip
+
+
+def _limit_file_size() -> None:  # in the child: a write past 64 kB fails as on a full disk
+    import resource
+    import signal
+
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG, not death by signal
+    resource.setrlimit(resource.RLIMIT_FSIZE, (64_000, 64_000))
+
+
+@st.composite
+def environment(draw):
+    return (
+        draw(st.sampled_from(list(ENV_COMMANDS))),
+        draw(st.sets(st.sampled_from(ODDITIES), max_size=2)),
+        draw(st.sampled_from(LOCATIONS)),
+    )
+
+
+def test_environment_oddities(bags, tmp_path_factory):
+    """Real processes in odd environments: no traceback, a documented exit code, at most one
+    error line; a refused or failed output leaves nothing half-written (no ``.partial``),
+    a finished one is whole."""
+    import shutil
+    import subprocess
+    import sys
+
+    plant_src = config_file("plant.yaml")
+
+    @settings(SETTINGS, max_examples=8)
+    @given(case=environment())
+    # each oddity and location at least once, beside the drawn ones
+    @example(case=("run", set(), "full"))  # the bag's writes fail mid-run
+    @example(case=("plot", {"home_unset", "lang_c"}, "full"))
+    @example(case=("sim", {"lang_c"}, "spaces_non_ascii"))  # a non-ASCII path printed
+    @example(case=("refused", {"lang_c"}, "spaces_non_ascii"))  # ... in the error line
+    @example(case=("sim", {"home_unset"}, "plain"))  # matplotlib without a home
+    @example(case=("run", {"stdout_pipe_closed"}, "plain"))
+    @example(case=("recover", {"stdout_closed"}, "read_only"))
+    def prop(case):
+        cmd, odd, where = case
+        base, out_opt, out_name, complete = ENV_COMMANDS[cmd]
+        tmp = tmp_path_factory.mktemp("env")
+        d = tmp / ("dir ü 名 x" if where == "spaces_non_ascii" else "d")
+        d.mkdir()
+        plant = d / "plant ü.yaml"
+        shutil.copy(plant_src, plant)
+        out = d / out_name
+        if where == "under_a_file":
+            (d / "file").write_text("")
+            out = d / "file" / out_name
+        elif where == "read_only":
+            if os.geteuid() == 0:  # root writes anywhere: a mode bit is no read-only place
+                (d / "file").write_text("")
+                out = d / "file" / out_name
+            else:
+                ro = d / "ro"
+                ro.mkdir(mode=0o555)
+                out = ro / out_name
+        argv = [a.replace("{bag}", bags["good"]).replace("{plant}", str(plant)) for a in base]
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        if "home_unset" in odd:
+            env.pop("HOME", None)
+        if "lang_c" in odd:
+            env.update(LANG="C", LC_ALL="C")
+            env.pop("PYTHONUTF8", None)
+        closed = "stdout_closed" in odd
+
+        def pre() -> None:
+            if closed:
+                os.close(1)
+            if where == "full":
+                _limit_file_size()
+
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pneu_control.cli.main", *argv, out_opt, str(out)],
+            stdout=subprocess.DEVNULL if closed else subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env,
+            cwd=d,
+            preexec_fn=pre,
+        )
+        if "stdout_pipe_closed" in odd and proc.stdout is not None:
+            proc.stdout.close()  # the reader went away (| head -0)
+        if proc.stdout is not None and not proc.stdout.closed:
+            _, err_b = proc.communicate(timeout=600)
+        else:
+            err_b = proc.stderr.read()
+            proc.wait(timeout=600)
+        err = err_b.decode("utf-8", "replace")
+        rc = proc.returncode
+        assert "Traceback" not in err and "internal error" not in err, (case, err)
+        assert rc in {0, 1, 2, 3}, (case, rc, err)
+        errors = [ln for ln in err.splitlines() if ": error: " in ln]
+        assert len(errors) == (1 if rc in (1, 2) else 0), (case, err)
+        if cmd == "refused" or where in ("under_a_file", "read_only"):
+            assert rc == 2, (case, rc, err)
+        elif where == "full":
+            assert rc in (0, 1, 3), (case, rc, err)  # small outputs fit; a bag does not
+        partials = [p for p in d.rglob("*") if p.name.endswith(".partial")]
+        assert not partials, (case, partials)
+        if rc in (0, 3):
+            for name in complete:
+                assert (out / name).is_file(), (case, name)
+            if not complete:
+                assert out.is_file(), case
+        elif rc in (1, 2):
+            held = [p for p in out.rglob("*")] if out.is_dir() else []
+            assert not held or where == "full", (case, held)
 
     prop()
