@@ -48,8 +48,34 @@ class UserError(Exception):
     """An error the user can fix; printed as one line (exit 2)."""
 
 
+_INF_NAN = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity", "nan"}
+
+
+def _number_as_typed(text: str, want: type) -> float | int:
+    """A number as the config files read it (``010`` 10, ``0x10`` 16, ``3e5``); ``1_000`` and
+    ``1:00`` are not numbers (Python's ``float`` would read 1000; YAML 1.1 60)."""
+    from pneu_msgs_py.params.yaml_file import read_scalar
+
+    if want is float and text.strip().lower() in _INF_NAN:
+        return float(text)  # refused by the option's own range, or meant (--horizon inf)
+    v = read_scalar(text)
+    ok = (int,) if want is int else (int, float)
+    if isinstance(v, bool) or not isinstance(v, ok):
+        what = "an integer" if want is int else "a number"
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not {what} (read as typed: 1_000 and 1:00 are not numbers)"
+        )
+    return want(v)
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line refusals: ``pneu run: error: argument --duration: ...`` (exit 2)."""
+    """argparse with one-line refusals: ``pneu run: error: argument --duration: ...`` (exit 2),
+    and numbers read as typed (``type=float``/``type=int`` options, docs/cli.md)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.register("type", float, lambda t: _number_as_typed(t, float))
+        self.register("type", int, lambda t: _number_as_typed(t, int))
 
     def error(self, message: str) -> NoReturn:
         self.exit(

@@ -49,14 +49,31 @@ def _check_text(path: str | os.PathLike, field: str) -> None:
         raise ParamError(field, os.fspath(path), "a path (not empty: '' is not '.')")
 
 
-def _check_location(p: Path, field: str, shown: str) -> None:
-    """``p`` (a directory to write in, existing or to be created) can be written."""
+def _check_names(p: Path, q: Path, field: str, shown: str, longest: str = "") -> None:
+    """Every name of ``p`` to be created under ``q`` (and ``longest``, the longest file name
+    to be written in ``p``) fits the file system's name length."""
+    try:
+        name_max = os.pathconf(q, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        name_max = 255
+    new = [part for part in p.relative_to(q).parts] if p != q else []
+    for name in (*new, longest):
+        if len(os.fsencode(name)) > name_max:
+            raise ParamError(
+                field, shown, f"names of at most {name_max} bytes ({name[:40]}... is longer)"
+            )
+
+
+def _check_location(p: Path, field: str, shown: str, longest: str = "") -> None:
+    """``p`` (a directory to write in, existing or to be created) can be written, and its new
+    names (with ``longest``, the longest file name written in it) are not too long."""
     q = p
     while not os.path.lexists(q) and q != q.parent:
         q = q.parent
     if not q.is_dir():
         what = "is a file" if q.is_file() else "is not a directory"
         raise ParamError(field, shown, f"a location under a directory ({q} {what})")
+    _check_names(p, q, field, shown, longest)
     if not os.access(q, os.W_OK | os.X_OK):
         raise ParamError(field, shown, f"a writable location ({q}: permission denied)")
     try:
@@ -180,7 +197,8 @@ class OutputDir:
                     f"be replaced by {name})",
                 )
             _check_replaceable(p / name, self.field, str(p))
-        _check_location(p, self.field, str(p))
+        longest = max((a + PARTIAL for a in self.artefacts), key=len, default="")
+        _check_location(p, self.field, str(p), longest)
         held = self._holdings() if p.is_dir() else []
         if held and not self.overwrite:
             listed = ", ".join(held[:6]) + (", ..." if len(held) > 6 else "")
@@ -293,7 +311,7 @@ class OutputFile:
             _check_replaceable(f, self.field, str(p))
         if (p.exists() or p.is_symlink()) and not self.overwrite:
             raise ParamError(self.field, str(p), "a new file, or --overwrite to replace it")
-        _check_location(p.parent, self.field, str(p))
+        _check_location(p.parent, self.field, str(p), self._lock_path.name)
         return self
 
     def __enter__(self) -> OutputFile:
