@@ -6,17 +6,29 @@
   example changed, and nothing was created at the output path.
 
 Arguments are generated around a valid base command of each subcommand: numbers
-(NaN, inf, huge, negative, not numbers), ``KIND:k=v`` specs with known and
-unknown keys, ``--set`` pairs, paths (missing, a directory, a corrupt bag, a
-foreign bag, a YAML file), and config files with one key given a generated
-value, deleted or given twice. Long commands (paper, tune, excite, identify,
-bench) only get refusals: a valid example would run for minutes.
+(NaN, inf, huge, negative, not numbers, YAML 1.1 readings: ``1:00``, ``010``,
+``1_000``), ``KIND:k=v`` specs with known and unknown keys (``kind`` too),
+``--set`` pairs, paths (missing, a directory, a corrupt bag, a foreign bag, a
+YAML file, a pipe, a device), empty values, the newer options (``--live-*``,
+``--address``, ``--uncertainty``, ``--backend``, ``--hold``, ``--horizon``,
+``--plumbing``) and config files with one key given a generated value, deleted
+or given twice. Long commands (paper, tune, excite, identify, task, bench) only
+get refusals: a valid example would run for minutes. Every refusal line is of
+reasonable length (paths aside).
+
+The environment is varied too (:func:`test_environment_oddities`, real
+processes): stdout closed or a pipe closed by its reader, ``HOME`` unset,
+``LANG=C``/``LC_ALL=C``, an output location that is read-only, a file, or full
+(a file-size limit fails the writes as a full disk does), and paths with spaces
+and non-ASCII characters: no traceback, a documented exit code, one error line,
+finished outputs or none, never a ``.partial`` left.
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import os
 import re
 import tempfile
 import warnings
@@ -24,7 +36,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from pneu_control.cli.main import main
 from pneu_msgs_py.params.paths import config_file
@@ -61,6 +73,7 @@ def bags(tmp_path_factory) -> dict[str, str]:
         w.finish()
     (d / "text.mcap").write_text("not a bag\n")
     (d / "empty.mcap").write_bytes(b"")
+    os.mkfifo(d / "fifo.mcap")  # a pipe nobody writes: read, it would block forever
     return {
         "good": str(good),
         "corrupt": str(d / "corrupt.mcap"),
@@ -70,25 +83,43 @@ def bags(tmp_path_factory) -> dict[str, str]:
         "empty": str(d / "empty.mcap"),
         "missing": str(d / "nope.mcap"),
         "dir": str(d),
+        "fifo": str(d / "fifo.mcap"),
+        "device": "/dev/zero",  # read, it would never end (only read: never an output here)
     }
 
 
 # -------------------------------------------------------------- strategies
+ODD_NUMBERS = ["", "-0", "1e400", "0x10", "nan", "-inf", "1_000", " 5 ", "abc", "1e-9",
+               "1:00", "010", "0o7", ".inf", "yes", "1e-300", "1e300"]  # fmt: skip
 NUMBERISH = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True).map(repr),
     st.integers(min_value=-(10**20), max_value=10**20).map(str),
-    st.sampled_from(["", "-0", "1e400", "0x10", "nan", "-inf", "1_000", " 5 ", "abc", "1e-9"]),
+    st.sampled_from(ODD_NUMBERS),
     st.text(alphabet="0123456789.-+eE,:=", min_size=1, max_size=6),
 )
 TEXT = st.text(min_size=0, max_size=8).filter(lambda s: "\x00" not in s)
 REF_KINDS = ["sine", "smooth_step", "constant", "ramp", "waypoints", "square", ""]
 REF_KEYS = ["amplitude", "frequency_hz", "offset", "target", "duration_s", "value", "slope",
-            "t0_s", "file", "bogus"]  # fmt: skip
+            "t0_s", "file", "bogus", "kind"]  # fmt: skip
 FAULTS = ["sensor_dropout", "stuck_sensor", "noise_burst", "broken_wire", "encoder_missed",
           "valve_stuck", "supply_drop", "added_mass", "controller_silent", "controller_nan",
           "meteor"]  # fmt: skip
 FAULT_KEYS = ["start_s", "duration_s", "axis", "sensor", "sigma_v", "volts", "fraction",
-              "factor", "mass_kg", "zap"]  # fmt: skip
+              "factor", "mass_kg", "zap", "kind"]  # fmt: skip
+# the sim card's options; never card= (it names a file to create) and never a stall long
+# enough to sleep through (a valid one is a real pause of the loop)
+BACKEND_KEYS = ["seed", "stall_at_s", "plant", "bogus", "kind"]
+ADDRESSES = [
+    "garbage",
+    "tcp://",
+    "tcp://127.0.0.1:99999",
+    "http://127.0.0.1:8786",
+    "tcp://127.0.0.1:1/x",
+    "127.0.0.1",
+    "tcp://:8786",
+    "tls://127.0.0.1:0",
+    "tcp://127.0.0.1:1",
+]  # fmt: skip  (port 1: nothing listens, refused at once)
 SET_KEYS = ["eso_smc.epsilon", "pid.kp", "rotary.pid.ki", "linear.td.r", "ladrc.omega_0",
             "reference.kind", "algorithm", "limits.u_max", "nope.nope", "linear", "=", ""]  # fmt: skip
 
@@ -104,7 +135,7 @@ def spec(kinds, keys) -> st.SearchStrategy[str]:
 
 
 def option_values(bags) -> dict[str, st.SearchStrategy]:
-    paths = st.sampled_from(list(bags.values()))
+    paths = st.sampled_from([*bags.values(), ""])
     # a valid duration is kept short (a valid 500 s run would take minutes); invalid ones anything
     duration = st.one_of(
         st.floats(min_value=0.01, max_value=0.15).map(repr),
@@ -144,8 +175,20 @@ def option_values(bags) -> dict[str, st.SearchStrategy]:
         "--min-fit": NUMBERISH,
         "--mode": st.one_of(st.sampled_from(["open", "closed", "auto"]), TEXT),
         "--hold": st.builds(
-            lambda a, v: f"{a}={v}", st.sampled_from(["linear", "rotary", "x"]), NUMBERISH
+            lambda a, v: f"{a}={v}", st.sampled_from(["linear", "rotary", "x", "kind"]), NUMBERISH
         ),
+        # the newer options: the live view alone (refused without --live), a Dask address
+        # (never one that answers), the band stage's size, the sim card, the plumbing
+        "--live-host": st.one_of(st.sampled_from(["0.0.0.0", "127.0.0.1", "::1"]), TEXT),
+        "--live-pace": st.one_of(st.sampled_from(["fast", "realtime"]), TEXT),
+        "--live-wait": NUMBERISH,
+        "--address": st.one_of(st.sampled_from(ADDRESSES), TEXT.filter(lambda v: ":" not in v)),
+        "--uncertainty": NUMBERISH,
+        "--sampler": st.one_of(st.sampled_from(["lhs", "sobol"]), TEXT),
+        "--backend": spec(["sim", "nidaqmx", "", "bogus"], BACKEND_KEYS).filter(
+            lambda v: not v.startswith("nidaqmx") or ":" in v  # nidaqmx alone: the real card
+        ),
+        "--plumbing": st.one_of(st.sampled_from(["paper", "bidirectional"]), TEXT),
     }
 
 
@@ -185,26 +228,32 @@ SWEEP = [
 COMMANDS = {
     "run": (["--axis", "linear", "--controller", "pid", "--duration", "0.05"], "--out",
             ["--duration", "--seed", "--window-start", "--axis", "--controller", "--reference",
-             "--fault", "--set", "--plant", "--controllers", "--safety"], None),
+             "--fault", "--set", "--plant", "--controllers", "--safety", "--live-host",
+             "--live-pace", "--live-wait"], None),
     "sim": (["--duration", "0.05", "--no-plot"], "--out",
-            ["--duration", "--seed", "--linear-voltage", "--rotary-voltage", "--plant"], None),
+            ["--duration", "--seed", "--linear-voltage", "--rotary-voltage", "--plant",
+             "--live-pace", "--live-wait"], None),
     "analyze": (["{bag}"], None, ["--window-start"], None),
     "plot": (["{bag}"], "--out", [], None),
     "compare": (["{bag}", "{bag}"], "--out", [], None),
     "replay": (["{bag}"], "--out", ["--controller", "--axis", "--set"], None),
     "recover": (["{bag}"], "--out", [], None),
-    "paper": ([], "--out", ["--seed", "--seeds", "--plant", "--config-dir", "--only"], "--plant"),
+    "paper": ([], "--out", ["--seed", "--seeds", "--plant", "--config-dir", "--only",
+                            "--uncertainty", "--sampler", "--address"], "--plant"),
     "tune": ([], "--out", ["--plant", "--controllers", "--axis", "--algorithm"], "--plant"),
     "sweep": (SWEEP, "--out", ["--duration", "--samples", "--seed", "--window-start",
                                "--reference", "--set", "--plant", "--workers", "--gains",
-                               "--experiment", "--config-dir"], None),
+                               "--experiment", "--config-dir", "--address", "--sampler"],
+              None),
     "excite": ([], "--out", ["--seed", "--axis", "--level", "--safety"], "--plant"),
     "identify": (["{bag}"], "--out", ["--axis", "--max-steps"], "--base"),
     "validate": (["{bag}"], "--out", ["--plant", "--mode", "--horizon", "--min-fit"], None),
     "rig": (["--backend", "sim:seed=1", "--axis", "linear", "--controller", "pid",
              "--duration", "0.05"], "--out",
             ["--duration", "--axis", "--reference", "--set", "--controllers", "--safety",
-             "--rig", "--hold"], None),
+             "--rig", "--hold", "--backend"], None),
+    "task": ([str(config_file("tasks/screw_in.yaml"))], "--out",
+             ["--seed", "--plumbing", "--controllers", "--safety"], "--plant"),
     "bench": (["--quick"], None, [], "--only"),
 }  # fmt: skip
 EXAMPLES = {"sweep": 10, "rig": 10, "validate": 10}  # fewer: each valid one runs for ~1 s
@@ -222,6 +271,14 @@ def invoke(argv: list[str]) -> tuple[int, str, str]:
     return rc, out.getvalue(), err.getvalue()
 
 
+MAX_LINE = 300  # a refusal of reasonable length, whatever was refused (paths aside)
+
+
+def short(line: str) -> str:
+    """``line`` with every absolute path as ``PATH`` (a user's path may be long)."""
+    return re.sub(r"/[^\s',;)]+", "PATH", line)
+
+
 def check(cmd: str, argv: list[str], changed: list[str], out_path: Path | None) -> int:
     rc, _, err = invoke(argv)
     assert "Traceback" not in err and "internal error" not in err, (argv, err)
@@ -230,6 +287,7 @@ def check(cmd: str, argv: list[str], changed: list[str], out_path: Path | None) 
         lines = [ln for ln in err.strip().splitlines() if not ln.startswith("pneu: warning:")]
         assert len(lines) == 1, (argv, err)
         assert lines[0].startswith(f"pneu {cmd}: error: "), (argv, lines)
+        assert len(short(lines[0])) <= MAX_LINE, (argv, lines[0])
         text = lines[0].lower()
         names = {c.lstrip("-").lower() for c in changed} | {c.lower() for c in changed}
         names |= {n.replace("-", "_") for n in names}
@@ -259,6 +317,8 @@ def command_line(draw, bags, cmd: str):
     chosen = draw(st.lists(st.sampled_from(opts), max_size=3)) if opts else []
     for opt in chosen:
         v = draw(values[opt])
+        if opt == "--address":  # with the executor it belongs to (never a local cluster)
+            argv += ["--executor", "dask"]
         argv += [opt, v] if not v.startswith("-") else [f"{opt}={v}"]
         changed.append(opt)
         if opt == "--set":  # the key as the user wrote it is a field name too
@@ -270,7 +330,8 @@ def command_line(draw, bags, cmd: str):
         argv += ["--only", draw(TEXT.filter(lambda v: not v.startswith("-")))]
         changed.append(refuse)
     elif refuse:
-        bad = draw(st.sampled_from(["corrupt", "foreign", "text", "empty", "missing", "dir"]))
+        bad = draw(st.sampled_from(["corrupt", "foreign", "text", "empty", "missing", "dir",
+                                    "fifo", "device"]))  # fmt: skip
         argv += [refuse, bags[bad]]
         changed.append(refuse)
     return argv, changed, out_opt
@@ -362,5 +423,130 @@ def test_generated_config_values(name):
             if rc == 2:
                 err = invoke(argv)[2]
                 assert str(path) in err  # the file is named, with line:col where known
+
+    prop()
+
+
+# ------------------------------------------------------ environment oddities
+ODDITIES = ("stdout_closed", "stdout_pipe_closed", "home_unset", "lang_c")
+LOCATIONS = ("plain", "spaces_non_ascii", "under_a_file", "read_only", "full")
+# (argv before the output, output option and name, what a complete output holds)
+ENV_COMMANDS = {
+    "run": (["run", "--axis", "linear", "--controller", "pid", "--duration", "0.05"],
+            "--out", "o", ("run.mcap", "metrics.json", "timeseries.npz")),
+    "sim": (["sim", "--duration", "0.05"], "--out", "o", ("sim.csv", "sim.png")),
+    "recover": (["recover", "{bag}"], "--out", "new.mcap", ()),
+    "plot": (["plot", "{bag}"], "--out", "fig.png", ()),
+    "refused": (["run", "--duration", "0", "--plant", "{plant}"], "--out", "o", ()),
+}  # fmt: skip
+
+
+def _limit_file_size() -> None:  # in the child: a write past 64 kB fails as on a full disk
+    import resource
+    import signal
+
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG, not death by signal
+    resource.setrlimit(resource.RLIMIT_FSIZE, (64_000, 64_000))
+
+
+@st.composite
+def environment(draw):
+    return (
+        draw(st.sampled_from(list(ENV_COMMANDS))),
+        draw(st.sets(st.sampled_from(ODDITIES), max_size=2)),
+        draw(st.sampled_from(LOCATIONS)),
+    )
+
+
+def test_environment_oddities(bags, tmp_path_factory):
+    """Real processes in odd environments: no traceback, a documented exit code, at most one
+    error line; a refused or failed output leaves nothing half-written (no ``.partial``),
+    a finished one is whole."""
+    import shutil
+    import subprocess
+    import sys
+
+    plant_src = config_file("plant.yaml")
+
+    @settings(SETTINGS, max_examples=8)
+    @given(case=environment())
+    # each oddity and location at least once, beside the drawn ones
+    @example(case=("run", set(), "full"))  # the bag's writes fail mid-run
+    @example(case=("plot", {"home_unset", "lang_c"}, "full"))
+    @example(case=("sim", {"lang_c"}, "spaces_non_ascii"))  # a non-ASCII path printed
+    @example(case=("refused", {"lang_c"}, "spaces_non_ascii"))  # ... in the error line
+    @example(case=("sim", {"home_unset"}, "plain"))  # matplotlib without a home
+    @example(case=("run", {"stdout_pipe_closed"}, "plain"))
+    @example(case=("recover", {"stdout_closed"}, "read_only"))
+    def prop(case):
+        cmd, odd, where = case
+        base, out_opt, out_name, complete = ENV_COMMANDS[cmd]
+        tmp = tmp_path_factory.mktemp("env")
+        d = tmp / ("dir ü 名 x" if where == "spaces_non_ascii" else "d")
+        d.mkdir()
+        plant = d / "plant ü.yaml"
+        shutil.copy(plant_src, plant)
+        out = d / out_name
+        if where == "under_a_file":
+            (d / "file").write_text("")
+            out = d / "file" / out_name
+        elif where == "read_only":
+            if os.geteuid() == 0:  # root writes anywhere: a mode bit is no read-only place
+                (d / "file").write_text("")
+                out = d / "file" / out_name
+            else:
+                ro = d / "ro"
+                ro.mkdir(mode=0o555)
+                out = ro / out_name
+        argv = [a.replace("{bag}", bags["good"]).replace("{plant}", str(plant)) for a in base]
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        if "home_unset" in odd:
+            env.pop("HOME", None)
+        if "lang_c" in odd:
+            env.update(LANG="C", LC_ALL="C")
+            env.pop("PYTHONUTF8", None)
+        closed = "stdout_closed" in odd
+
+        def pre() -> None:
+            if closed:
+                os.close(1)
+            if where == "full":
+                _limit_file_size()
+
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pneu_control.cli.main", *argv, out_opt, str(out)],
+            stdout=subprocess.DEVNULL if closed else subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env,
+            cwd=d,
+            preexec_fn=pre,
+        )
+        if "stdout_pipe_closed" in odd and proc.stdout is not None:
+            proc.stdout.close()  # the reader went away (| head -0)
+        if proc.stdout is not None and not proc.stdout.closed:
+            _, err_b = proc.communicate(timeout=600)
+        else:
+            err_b = proc.stderr.read()
+            proc.wait(timeout=600)
+        err = err_b.decode("utf-8", "replace")
+        rc = proc.returncode
+        assert "Traceback" not in err and "internal error" not in err, (case, err)
+        assert rc in {0, 1, 2, 3}, (case, rc, err)
+        errors = [ln for ln in err.splitlines() if ": error: " in ln]
+        assert len(errors) == (1 if rc in (1, 2) else 0), (case, err)
+        if cmd == "refused" or where in ("under_a_file", "read_only"):
+            assert rc == 2, (case, rc, err)
+        elif where == "full":
+            assert rc in (0, 1, 3), (case, rc, err)  # small outputs fit; a bag does not
+        partials = [p for p in d.rglob("*") if p.name.endswith(".partial")]
+        assert not partials, (case, partials)
+        if rc in (0, 3):
+            for name in complete:
+                assert (out / name).is_file(), (case, name)
+            if not complete:
+                assert out.is_file(), case
+        elif rc in (1, 2):
+            held = [p for p in out.rglob("*")] if out.is_dir() else []
+            assert not held or where == "full", (case, held)
 
     prop()

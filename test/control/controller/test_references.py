@@ -134,8 +134,11 @@ def test_bad_yaml_waypoints_and_missing_file(tmp_path):
 
 def test_nyquist_checked_when_building():
     with pytest.raises(
-        ParamError, match=r"reference.frequency_hz: 600.0 refused; allowed: \(0, 500\) Hz"
+        ParamError, match=r"reference.frequency_hz: 600.0 refused; allowed: \[0.00166667, 500\) Hz"
     ):
         _ref(kind="sine", frequency_hz=600.0)
+    # the lower end: one whole period inside the longest run (the duration cap, 600 s)
+    with pytest.raises(ParamError, match=r"frequency_hz: 1e-300 refused; allowed: \[1/600"):
+        validate(ReferenceParams(kind="sine", frequency_hz=1e-300))
     with pytest.raises(ParamError, match="reference.kind"):
         make_reference(ReferenceParams(kind="square"), "linear")  # unvalidated object

@@ -170,8 +170,34 @@ def test_backend_by_name_and_its_options():
     assert isinstance(daq, TwinDaq) and daq.plant.seed == 3 and daq._stalls == [(1.0, 0.002)]
     with pytest.raises(ParamError, match=r"backend sim sede: 3 refused; allowed: one of seed"):
         make_backend("sim:sede=3", rig)
-    with pytest.raises(ParamError, match=r"backend sim seed: 'x' refused; allowed: a int"):
+    with pytest.raises(ParamError, match=r"backend sim seed: 'x' refused; allowed: an integer"):
         make_backend("sim:seed=x", rig)
+    # every option bounded by a true range: a seed numpy takes whole, a stall inside the cap
+    with pytest.raises(ParamError, match=r"seed: 4294967296 refused; allowed: an integer in \["):
+        make_backend("sim:seed=4294967296", rig)
+    with pytest.raises(ParamError, match=r"stall_at_s: 1e\+300 refused; allowed: < 0 \(no stall\)"):
+        make_backend("sim:stall_at_s=1e300", rig)
+    with pytest.raises(ParamError, match=r"stall_ms: 1e\+300 refused; allowed: \(0, 600000\] ms"):
+        make_backend("sim:stall_at_s=1,stall_ms=1e300", rig)
+
+
+def test_a_card_file_never_overwrites_another_file(tmp_path):
+    """``card=`` names the card's register file: a file that holds anything else (a bag, a
+    config file) is refused and left byte for byte; an empty or new file becomes a card."""
+    rig = rig_for()
+    other = tmp_path / "plant.yaml"
+    other.write_text("linear: {}\n" * 20)
+    before = other.read_bytes()
+    with pytest.raises(ParamError, match=r"backend sim card: .* refused; allowed: a new file or"):
+        make_backend(f"sim:card={other}", rig)
+    assert other.read_bytes() == before
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(ParamError, match=r"not a regular file"):
+        make_backend(f"sim:card={fifo}", rig)
+    card = tmp_path / "card"
+    make_backend(f"sim:card={card}", rig).close()
+    make_backend(f"sim:card={card}", rig).close()  # the card of an earlier run: taken again
     with pytest.raises(ParamError, match=r"backend: 'sum' refused; allowed: one of nidaqmx, sim"):
         make_backend("sum", rig)
 

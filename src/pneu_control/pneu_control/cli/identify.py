@@ -51,6 +51,21 @@ def resolve_bag(bag: str) -> str:
     return bag
 
 
+def resolve_bags(bags: list[str]) -> list[str]:
+    """Each bag resolved (:func:`resolve_bag`); the same bag twice (by any path) is refused:
+    it would count twice in a fit, or be scored twice."""
+    from pneu_msgs_py.lifecycle.outputs import is_same_path
+
+    out: list[str] = []
+    for bag in bags:
+        b = resolve_bag(bag)
+        for seen in out:
+            if is_same_path(b, seen):
+                raise ParamError("BAG", bag, f"each bag once (the same bag as {seen})")
+        out.append(b)
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     """``pneu identify``: fit the plant to the bags, write the plant.yaml and its report; the exit
     code."""
@@ -65,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     # everything checked before anything is written: options, the output, the base file, bags
     if not 1 <= args.max_steps <= MAX_STEPS:
         raise ParamError("--max-steps", args.max_steps, f"an integer in [1, {MAX_STEPS}]")
-    bags = [resolve_bag(b) for b in args.bags]
+    bags = resolve_bags(args.bags)
     base_path = Path(args.base) if args.base else config_file("plant.yaml")
     out_claims = output_claims(args.out, overwrite=args.overwrite, inputs=[*bags, base_path])
     with from_option("--base" if args.base else None):

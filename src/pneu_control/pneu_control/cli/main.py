@@ -48,14 +48,50 @@ class UserError(Exception):
     """An error the user can fix; printed as one line (exit 2)."""
 
 
+_INF_NAN = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity", "nan"}
+
+
+def _number_as_typed(text: str, want: type) -> float | int:
+    """A number as the config files read it (``010`` 10, ``0x10`` 16, ``3e5``); ``1_000`` and
+    ``1:00`` are not numbers (Python's ``float`` would read 1000; YAML 1.1 60)."""
+    from pneu_msgs_py.params.yaml_file import read_scalar
+
+    if want is float and text.strip().lower() in _INF_NAN:
+        return float(text)  # refused by the option's own range, or meant (--horizon inf)
+    v = read_scalar(text)
+    ok = (int,) if want is int else (int, float)
+    if isinstance(v, bool) or not isinstance(v, ok):
+        what = "an integer" if want is int else "a number"
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not {what} (read as typed: 1_000 and 1:00 are not numbers)"
+        )
+    return want(v)
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line refusals: ``pneu run: error: argument --duration: ...`` (exit 2)."""
+    """argparse with one-line refusals: ``pneu run: error: argument --duration: ...`` (exit 2),
+    and numbers read as typed (``type=float``/``type=int`` options, docs/cli.md)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.register("type", float, lambda t: _number_as_typed(t, float))
+        self.register("type", int, lambda t: _number_as_typed(t, int))
 
     def error(self, message: str) -> NoReturn:
         self.exit(
             exits.BAD_INPUT,
             f"{self.prog}: error: {_one_line(message)} (see {self.prog} --help)\n",
         )
+
+    def _get_values(self, action, arg_strings):
+        # an empty value is never meant: '' as --out would be '.', as --plant the default file,
+        # as --reference the file's reference (docs/cli.md: an option given is never empty)
+        own = action.nargs not in (argparse.PARSER, argparse.REMAINDER)  # not a subcommand's
+        for text in arg_strings if own and isinstance(arg_strings, list) else ():
+            if isinstance(text, str) and not text.strip():
+                name = "/".join(action.option_strings) or action.metavar or action.dest
+                self.error(f"argument {name}: {text!r} refused; allowed: a value that is not empty")
+        return super()._get_values(action, arg_strings)
 
 
 def _available() -> list[tuple[str, object]]:
@@ -100,9 +136,12 @@ def main(argv: list[str] | None = None, *, restore_signals: bool = True) -> int:
     ``restore_signals`` False (the ``pneu`` process itself): after the command, signals
     stay recorded-only, so one arriving while the interpreter shuts down changes nothing.
     """
+    from pneu_msgs_py.params import inputs
+
     restore = signals.install()  # first: a signal at any moment from here on ends cleanly
     try:
-        return _main(argv)
+        with inputs.tracking():  # every file the command reads: never one of its outputs
+            return _main(argv)
     except signals.Interrupted as err:  # during argument parsing or set-up
         print(f"pneu: interrupted by {signals.signal_name(err.signum)}", file=sys.stderr)
         return exits.interrupted_code(err.signum)
@@ -167,7 +206,7 @@ def _classify(err: Exception) -> tuple[int, str]:
     from pneu_msgs_py.live.errors import LiveError
     from pneu_msgs_py.params.core import ParamError
 
-    if isinstance(err, BagWriteError):
+    if isinstance(err, (BagWriteError, exits.CommandFailed)):
         return exits.RUNTIME_ERROR, str(err)
     if isinstance(err, (ParamError, BagError, LiveError, UserError)):
         return exits.BAD_INPUT, str(err)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import time
@@ -68,7 +69,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=int,
         default=0,
         metavar="N",
-        help="also run every row over N plant samples drawn from plant.yaml's ranges: "
+        help="also run every row over N plant samples drawn from plant.yaml's ranges, "
+        "[0, 10000]: "
         "median and 5-95 %% band beside each figure, the paper's ranking odds, "
         "sensitivities, band figures (uncertainty/ in --out)",
     )
@@ -110,9 +112,16 @@ def run(args: argparse.Namespace) -> int:
         raise ParamError("--seeds", args.seeds, f"an integer in [1, {MAX_SEEDS}]")
     session.check_seed(args.seed)
     session.check_seed(args.seed + args.seeds - 1, "--seed + --seeds - 1")
-    if args.uncertainty < 0:
-        raise ParamError("--uncertainty", args.uncertainty, "an integer >= 0")
-    from pneu_control.cli.sweep import check_executor_args
+    from pneu_control.cli.sweep import MAX_SAMPLES, check_executor_args
+
+    if not 0 <= args.uncertainty <= MAX_SAMPLES:
+        raise ParamError(
+            "--uncertainty",
+            args.uncertainty,
+            f"an integer in [0, {MAX_SAMPLES}] (0: off; the plant-sample cap of pneu sweep)",
+        )
+    if args.uncertainty:  # sample s runs with seed + s
+        session.check_seed(args.seed + args.uncertainty - 1, "--seed + --uncertainty - 1")
 
     check_executor_args(args)
     experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
@@ -191,11 +200,16 @@ def _run(args, claim: OutputDir, plant, cfg: Path, experiments) -> int:
     bar.close()
     with signals.deferred():
         paper.write_table(rows, out, extra={"seed": args.seed, "seeds": args.seeds})
+    if not args.no_plots:  # the nominal figures first: an interrupted band stage keeps them
+        _figures(claim, experiments, results)
     band_md = ""
     if args.uncertainty:
-        band_md = _uncertainty(args, rows, experiments, cfg, out)
-    if not args.no_plots:
-        _figures(claim, experiments, results)
+        try:
+            band_md = _uncertainty(args, rows, experiments, cfg, out)
+        except signals.Interrupted as err:  # the nominal table is complete: it says the rest is not
+            with signals.deferred():
+                _mark_interrupted(out, args.uncertainty, err.signum)
+            raise
     print()
     print(paper.render_markdown(rows))
     if band_md:
@@ -234,6 +248,7 @@ def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
     from pneu_control.cli.sweep import run_plan
     from pneu_control.sweep.engine import plan_sweep
 
+    signals.raise_if_pending()  # one recorded while the table or figures were written
     plan = plan_sweep(
         samples=args.uncertainty,
         seed=args.seed,
@@ -251,6 +266,35 @@ def _uncertainty(args, rows, experiments, cfg: Path, out: Path) -> str:
     nominal = {(r.id, r.controller, r.gains): (r.e_max, r.rmse) for r in rows}
     with signals.deferred():
         return _write_uncertainty(args, result, out, nominal, len(plan.tasks))
+
+
+def _mark_interrupted(out: Path, samples: int, signum: int) -> None:
+    """paper_table.json (``uncertainty``: status interrupted, the signal, when) and
+    paper_table.md (a last section) say the band stage was interrupted; no band table."""
+    import json
+
+    name = signals.signal_name(signum)
+    record = {
+        "status": "interrupted",
+        "interrupted": True,
+        "signal": name,
+        "interrupted_utc": signals.pending_since(),
+        "samples": samples,
+    }
+    text = (
+        f"\n## Over {samples} plant samples: interrupted\n\n"
+        f"Interrupted by {name} before its runs finished: no band table. "
+        "The nominal table above is complete.\n"
+    )
+    md, js = out / "paper_table.md", out / "paper_table.json"
+    doc = json.loads(js.read_text(encoding="utf-8"))
+    doc["uncertainty"] = record
+    partial = js.with_name(js.name + ".partial")
+    partial.write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    os.replace(partial, js)
+    with open(md, "a", encoding="utf-8") as fh:
+        fh.write(text)
+    print(f"pneu paper: uncertainty stage interrupted by {name}; {js} says so", file=sys.stderr)
 
 
 def _write_uncertainty(args, result, out: Path, nominal, n_tasks: int) -> str:

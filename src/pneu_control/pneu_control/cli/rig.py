@@ -70,11 +70,12 @@ def parse_hold(text: str) -> dict[str, float]:
 
     if not text:
         return {}
-    _, values = parse_spec("hold:" + text, "--hold")
+    try:
+        _, values = parse_spec("hold:" + text, "--hold", keys=AXES)
+    except ParamError as err:  # named as the user wrote it (no "hold:" kind of theirs)
+        raise ParamError("--hold", err.value, err.allowed) from None
     out = {}
     for axis, v in values.items():
-        if axis not in AXES:
-            raise ParamError("--hold", axis, "one of " + ", ".join(AXES))
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not U_MIN_V <= v <= U_MAX_V:
             raise ParamError(f"--hold {axis}", v, f"[{U_MIN_V:g}, {U_MAX_V:g}] V")
         out[axis] = float(v)
@@ -84,11 +85,13 @@ def parse_hold(text: str) -> dict[str, float]:
 def run(args: argparse.Namespace) -> int:
     """``pneu rig``: the controllers in the driver's loop on ``--backend`` until the duration or a
     signal; the exit code."""
+    from pneu_driver.daq.backends import check_backend
     from pneu_driver.daq.rig import load_rig_params
 
     from pneu_control.experiment.rig_run import rig_dir, run_rig
 
     # everything checked before anything is written: options, the output, every file
+    check_backend(args.backend)
     until_stopped = args.duration == 0
     duration_s = MAX_DURATION_S if until_stopped else check_duration(args.duration)
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)

@@ -138,12 +138,49 @@ def run_plan(plan, args: argparse.Namespace, desc: str, label: str):
         bar.close()
 
 
+ADDRESS_SCHEMES = ("tcp", "tls")
+PROBE_S = 5.0  # the wait for a scheduler's port to answer, before anything is written
+
+
+def check_address(address: str, field: str = "--address") -> tuple[str, int]:
+    """``[tcp|tls://]HOST:PORT`` -> (host, port), and something answers there (a TCP connect
+    within :data:`PROBE_S`): else one ParamError line, before anything is written."""
+    import socket
+    from urllib.parse import urlsplit
+
+    allowed = "a Dask scheduler address tcp://HOST:PORT (or tls://), PORT in [1, 65535]"
+    text = address.strip()
+    url = urlsplit(text if "://" in text else f"tcp://{text}")
+    try:
+        host, port = url.hostname, url.port
+    except ValueError:
+        host, port = None, None
+    if url.scheme not in ADDRESS_SCHEMES or not host or not port or url.path not in ("", "/"):
+        raise ParamError(field, address, allowed)
+    try:
+        with socket.create_connection((host, port), timeout=PROBE_S):
+            pass
+    except TimeoutError:
+        raise ParamError(
+            field, address, f"a running Dask scheduler (nothing answered within {PROBE_S:g} s)"
+        ) from None
+    except OSError as err:
+        why = err.strerror or type(err).__name__
+        raise ParamError(
+            field, address, f"a running Dask scheduler ({host}:{port}: {why})"
+        ) from None
+    return host, port
+
+
 def check_executor_args(args: argparse.Namespace) -> None:
-    """Refuse ``--address`` without the dask executor and ``--workers`` out of range."""
+    """Refuse ``--address`` without the dask executor, or where no scheduler answers, and
+    ``--workers`` out of range."""
     if args.address is not None and args.executor != "dask":
         raise ParamError("--address", args.address, "with --executor dask")
     if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
         raise ParamError("--workers", args.workers, f"an integer in [1, {MAX_WORKERS}]")
+    if args.address is not None:
+        check_address(args.address)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from pneu_msgs_py.lifecycle import signals
+from pneu_msgs_py.lifecycle.duration import MAX_DURATION_S, MIN_DURATION_S
 from pneu_msgs_py.lifecycle.outputs import OutputDir
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.yaml_file import from_option
@@ -25,7 +26,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="open: the recorded voltages (default); closed: the recorded controller "
                    "or excitation again; auto: closed where the bag says what ran")  # fmt: skip
     p.add_argument("--horizon", type=float, default=math.inf, metavar="S",
-                   help="open loop: restart from the measured state every S seconds (default: never)")  # fmt: skip
+                   help="open loop: restart from the measured state every S seconds, "
+                   "[0.01, 600] (default: never)")  # fmt: skip
     p.add_argument(
         "--out",
         default=None,
@@ -38,7 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="replace the outputs of a previous pneu validate in DIR",
     )
     p.add_argument("--min-fit", type=float, default=None, metavar="PCT",
-                   help="exit 1 if a held-out bag's signal fits below PCT")  # fmt: skip
+                   help="exit 1 if a held-out bag's signal fits below PCT (<= 100)")  # fmt: skip
+
+
+MIN_HORIZON_S = MIN_DURATION_S  # ten samples: the fewest a signal is scored on
 
 
 def _used_by_identify(plant_file: str | None) -> set[str]:
@@ -61,21 +66,56 @@ def _figure(i: int, bag: str) -> str:
     return f"validate_{i:02d}_{Path(bag).parent.name}.png"
 
 
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse a --horizon or --min-fit outside its range."""
+    if not (args.horizon == math.inf or MIN_HORIZON_S <= args.horizon <= MAX_DURATION_S):
+        raise ParamError(
+            "--horizon",
+            args.horizon,
+            f"[{MIN_HORIZON_S:g}, {MAX_DURATION_S:g}] s (ten samples to the duration cap), "
+            "or inf: never restart",
+        )
+    if args.min_fit is not None and not (math.isfinite(args.min_fit) and args.min_fit <= 100.0):
+        raise ParamError(
+            "--min-fit", args.min_fit, "a finite percentage <= 100 (a fit is at most 100 %)"
+        )
+
+
+def _validation(bag: str, plant, used: set[str], args: argparse.Namespace):
+    """The validation of one bag; refused (before anything is written) if nothing of it
+    could be compared."""
+    from pneu_control.sysid.record import load_record
+    from pneu_control.sysid.validate import validate_record
+
+    rec = load_record(bag)
+    held = str(Path(rec.path).resolve()) not in used
+    v = validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
+    if not v.fits:  # refused before anything is written: nothing of it could be compared
+        raise ParamError(
+            "BAG",
+            bag,
+            f"a bag with a stretch to compare (mode {v.mode}: none here, "
+            + (next((n for n in rec.notes if "not used" in n), "") or "too few valid samples")
+            + (
+                "); try --horizon S (restart from the measured state every S s)"
+                if math.isinf(args.horizon) and v.mode == "open"
+                else ")"
+            ),
+        )
+    return v
+
+
 def run(args: argparse.Namespace) -> int:
     """``pneu validate``: replay each bag through the twin, write the report and overlays; the exit
     code."""
     from pneu_sim.physics.plant_file import load_plant
 
-    from pneu_control.cli.identify import resolve_bag
-    from pneu_control.sysid.record import load_record
-    from pneu_control.sysid.validate import plot_validation, validate_record, write_report
+    from pneu_control.cli.identify import resolve_bags
+    from pneu_control.sysid.validate import plot_validation, write_report
 
     # everything checked before anything is written: options, the output, the plant file
-    if math.isnan(args.horizon) or args.horizon <= 0:
-        raise ParamError("--horizon", args.horizon, "> 0 s (inf: never restart)")
-    if args.min_fit is not None and not math.isfinite(args.min_fit):
-        raise ParamError("--min-fit", args.min_fit, "a finite percentage (fits are <= 100 %)")
-    bags = [resolve_bag(b) for b in args.bags]
+    _check_options(args)
+    bags = resolve_bags(args.bags)
     claim = None
     if args.out:
         names = ["validate.json", *(_figure(i, b) for i, b in enumerate(bags))]
@@ -85,13 +125,7 @@ def run(args: argparse.Namespace) -> int:
     with from_option("--plant" if args.plant else None):
         plant = load_plant(args.plant)
     used = _used_by_identify(args.plant)
-    results = []
-    for bag in bags:
-        rec = load_record(bag)
-        held = str(Path(rec.path).resolve()) not in used
-        results.append(
-            validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
-        )
+    results = [_validation(bag, plant, used, args) for bag in bags]
     if claim is not None:
         with claim, signals.deferred():  # every file finished, whatever signal comes
             for i, (v, bag) in enumerate(zip(results, bags)):

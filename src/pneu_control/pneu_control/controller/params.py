@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pneu_msgs_py.lifecycle.duration import MAX_DURATION_S
 from pneu_msgs_py.params.core import (
     MISSING,
     ParamError,
@@ -121,9 +122,9 @@ class ReferenceParams:
         0.25,
         unit="Hz",
         desc="sine frequency",
-        lo=0.0,
-        lo_open=True,
-        allowed="(0, 1/(2·sample_time_s)) Hz: above 0 and below the Nyquist frequency "
+        lo=1.0 / MAX_DURATION_S,
+        allowed=f"[1/{MAX_DURATION_S:g}, 1/(2·sample_time_s)) Hz: at least one period in the "
+        f"longest run ({MAX_DURATION_S:g} s, the duration cap) and below the Nyquist frequency "
         "(500 Hz at the paper's T = 1 ms)",
         source="paper",
     )
@@ -136,12 +137,19 @@ class ReferenceParams:
         unit="s",
         desc="smooth_step duration; ramp duration (0 = endless)",
         lo=0.0,
+        hi=MAX_DURATION_S,  # longer never completes in any run (the duration cap)
         source="paper Eq. 38",
     )
     value: float = param(800.0, unit="mm | rpm", desc="constant value", source="paper (800 rpm)")
     slope: float = param(0.0, unit="mm/s | rpm/s", desc="ramp slope")
     file: str = param("", desc="waypoint file (CSV t,value or YAML), paper units")
-    t0_s: float = param(0.0, unit="s", desc="start time; the reference holds before it", lo=0.0)
+    t0_s: float = param(
+        0.0,
+        unit="s",
+        desc="start time; the reference holds before it",
+        lo=0.0,
+        hi=MAX_DURATION_S,  # later never starts in any run (the duration cap)
+    )
 
     def _check(self) -> None:
         if self.kind == "smooth_step" and self.duration_s <= 0.0:

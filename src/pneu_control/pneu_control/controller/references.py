@@ -25,11 +25,13 @@ Kinds (``u`` = scale: mm → m or rpm → rad/s, τ = max(t − t0, 0)):
 from __future__ import annotations
 
 import csv
+import io
 import math
 from pathlib import Path
 from typing import Protocol
 
 from pneu_msgs_py.contract.units import DEG_PER_RAD, MM_PER_M, RPM_PER_RAD_S
+from pneu_msgs_py.lifecycle.duration import MAX_DURATION_S
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.records import Record, RecordType, kernel
 
@@ -298,12 +300,15 @@ def _resolve(file: str) -> Path:
     return p
 
 
-def load_waypoints(file: str, key: str = "reference.file") -> tuple[list[float], list[float]]:
+def load_waypoints(
+    file: str, key: str = "reference.file", min_step_s: float = 0.001
+) -> tuple[list[float], list[float]]:
     """Read (t, value) rows from CSV (``t,value`` with optional header) or YAML.
 
     YAML forms: ``[[t, v], ...]``, ``{points: [[t, v], ...]}`` or
-    ``{t: [...], value: [...]}``. Time must be strictly increasing, values
-    finite, at least two rows; otherwise :class:`ParamError` naming the row.
+    ``{t: [...], value: [...]}``. Times in [0, 600] s (the duration cap), each at
+    least ``min_step_s`` (one sample period) after the previous one, values finite,
+    at least two rows; otherwise :class:`ParamError` naming the row.
     """
     path = _resolve(file)
     if not path.is_file():
@@ -329,38 +334,59 @@ def load_waypoints(file: str, key: str = "reference.file") -> tuple[list[float],
                 key, file, "YAML list of [t, value], {points: ...} or {t: [...], value: [...]}"
             )
     else:
-        with open(path, encoding="utf-8", newline="") as fh:
-            for i, row in enumerate(csv.reader(fh)):
-                cells = [c.strip() for c in row if c.strip() != ""]
-                if not cells or cells[0].startswith("#"):
-                    continue
-                if i == 0 and not _is_number(cells[0]):
-                    continue  # header
-                if len(cells) < 2:
-                    raise ParamError(f"{key}[row {i + 1}]", row, "two columns t, value")
-                rows.append((cells[0], cells[1]))
+        from pneu_msgs_py.params.inputs import UnreadableInput, read_input
+
+        try:
+            raw = read_input(path)  # a regular file of bounded size, remembered as an input
+            text = raw.decode("utf-8")
+        except UnreadableInput as err:
+            raise ParamError(
+                key, file, f"a readable CSV or YAML waypoint file ({err.problem})"
+            ) from None
+        except UnicodeDecodeError as err:
+            raise ParamError(key, file, f"a UTF-8 CSV file (byte {err.start} is not)") from None
+        for i, row in enumerate(csv.reader(io.StringIO(text, newline=""))):
+            cells = [c.strip() for c in row if c.strip() != ""]
+            if not cells or cells[0].startswith("#"):
+                continue
+            if i == 0 and not _is_number(cells[0]):
+                continue  # header
+            if len(cells) < 2:
+                raise ParamError(f"{key}[row {i + 1}]", row, "two columns t, value")
+            rows.append((cells[0], cells[1]))
     t: list[float] = []
     r: list[float] = []
     for i, (ti, ri) in enumerate(rows):
-        for name, val in (("t", ti), ("value", ri)):
-            try:
-                f = float(val)  # type: ignore[arg-type]
-            except (TypeError, ValueError):
-                raise ParamError(f"{key}[{i}].{name}", val, "a finite number") from None
-            if not math.isfinite(f):
-                raise ParamError(f"{key}[{i}].{name}", val, "a finite number (no NaN or inf)")
-        tf_, rf_ = float(ti), float(ri)  # type: ignore[arg-type]
-        if t and tf_ <= t[-1]:
+        tf_, rf_ = (_number(f"{key}[{i}].{n}", v) for n, v in (("t", ti), ("value", ri)))
+        if t and tf_ < t[-1] + min_step_s:
             raise ParamError(
-                f"{key}[{i}].t", tf_, f"strictly increasing time: > {t[-1]:g} s (previous row)"
+                f"{key}[{i}].t",
+                tf_,
+                f"strictly increasing time, at least one sample period after the previous row: "
+                f">= {t[-1] + min_step_s:g} s",
             )
-        if not t and tf_ < 0.0:
-            raise ParamError(f"{key}[{i}].t", tf_, "[0, inf) s")
+        if not 0.0 <= tf_ <= MAX_DURATION_S:
+            raise ParamError(
+                f"{key}[{i}].t", tf_, f"[0, {MAX_DURATION_S:g}] s (the duration cap of every run)"
+            )
         t.append(tf_)
         r.append(rf_)
     if len(t) < 2:
         raise ParamError(key, file, "at least two waypoints")
     return t, r
+
+
+def _number(key: str, value: object) -> float:
+    """A finite number as typed (a CSV cell is read like a YAML value: ``010`` is 10,
+    ``1:00`` and ``1_000`` are not numbers)."""
+    from pneu_msgs_py.params.yaml_file import read_scalar
+
+    v = read_scalar(value) if isinstance(value, str) else value
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ParamError(key, value, "a finite number")
+    if not math.isfinite(v):
+        raise ParamError(key, value, "a finite number (no NaN or inf)")
+    return float(v)
 
 
 def _is_number(s: str) -> bool:
@@ -378,11 +404,13 @@ def make_reference(
     u = 1.0 / axis_scale(axis, rotary_control)
     if p.kind == "sine":
         f_nyq = 0.5 / sample_time_s
-        if not 0.0 < p.frequency_hz < f_nyq:
+        f_min = 1.0 / MAX_DURATION_S
+        if not f_min <= p.frequency_hz < f_nyq:
             raise ParamError(
                 "reference.frequency_hz",
                 p.frequency_hz,
-                f"(0, {f_nyq:g}) Hz (Nyquist at T = {sample_time_s:g} s)",
+                f"[{f_min:.6g}, {f_nyq:g}) Hz (one period in the longest run, "
+                f"{MAX_DURATION_S:g} s; Nyquist at T = {sample_time_s:g} s)",
             )
         return Sine(p.amplitude * u, p.frequency_hz, p.offset * u, p.t0_s)
     if p.kind == "smooth_step":
@@ -394,7 +422,7 @@ def make_reference(
     if p.kind == "ramp":
         return Ramp(p.offset * u, p.slope * u, p.duration_s, p.t0_s)
     if p.kind == "waypoints":
-        t, r = load_waypoints(p.file)
+        t, r = load_waypoints(p.file, min_step_s=sample_time_s)
         return Waypoints(t, [x * u for x in r], p.t0_s)
     raise ParamError(
         "reference.kind", p.kind, "one of sine, smooth_step, constant, ramp, waypoints"

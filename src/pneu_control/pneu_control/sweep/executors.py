@@ -32,13 +32,16 @@ import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from pneu_msgs_py.lifecycle.exits import CommandFailed
+
 __all__ = ["EXECUTORS", "SweepExecutorError", "default_workers", "map_tasks"]
 
 EXECUTORS = ("local", "serial", "dask")
+CONNECT_S = 10.0  # the wait for a Dask scheduler to accept the client
 
 
-class SweepExecutorError(RuntimeError):
-    """The executor could not run the sweep (timeout, lost worker, no cluster)."""
+class SweepExecutorError(CommandFailed):
+    """The executor could not run the sweep (timeout, lost worker, no cluster): exit 1, one line."""
 
 
 def default_workers() -> int:
@@ -149,11 +152,23 @@ def _map_dask(fn, tasks, workers, address, timeout_s, progress, client) -> list[
         return _gather(distributed, client, fn, tasks, timeout_s, progress)
     if address is not None:
         try:
-            cl = distributed.Client(address, timeout=30)
-        except (OSError, TimeoutError) as err:
-            raise SweepExecutorError(f"executor dask: no scheduler at {address}: {err}") from None
+            cl = distributed.Client(address, timeout=CONNECT_S)
+        except (OSError, TimeoutError, ValueError) as err:
+            raise SweepExecutorError(
+                f"executor dask: no scheduler at {address} (within {CONNECT_S:g} s): {err}"
+            ) from None
+        except Exception as err:  # something answered, but not as a scheduler speaks
+            raise SweepExecutorError(
+                f"executor dask: {address} did not answer as a Dask scheduler "
+                f"({type(err).__name__}: {str(err)[:120]})"
+            ) from None
         with cl:
-            cl.get_versions(check=True)
+            try:
+                cl.get_versions(check=True)
+            except Exception as err:  # a version mismatch says which package, one line
+                raise SweepExecutorError(
+                    f"executor dask: {address}: {type(err).__name__}: {' '.join(str(err).split())[:300]}"
+                ) from None
             return _gather(distributed, cl, fn, tasks, timeout_s, progress)
     from pneu_msgs_py.lifecycle import signals
 

@@ -277,6 +277,13 @@ def _segment(i: int, raw: Any, x: float, th: float, safety, limits, one_way: boo
             timeout,
             f"[{dur:.6g}, inf) s (the motion it bounds takes {dur:.6g} s)",
         )
+    if until["kind"] == "settled" and dur + until["for_s"] > timeout:  # could never end it
+        raise ParamError(
+            f"{where}.until.settled.for_s",
+            until["for_s"],
+            f"(0, {timeout - dur:.6g}] s: settled within the timeout ({timeout:.6g} s, "
+            f"the motion taking {dur:.6g} s)",
+        )
     if kind == "wait" and until["kind"] == "time":
         raise ParamError(
             f"{where}.until", "time", "settled, pressure or force (a wait ends on a condition)"
@@ -427,10 +434,34 @@ def _until(where: str, v: Any, kind: str) -> dict[str, Any]:
         if sensor not in SENSORS:
             raise ParamError(f"{at}.sensor", sensor, f"one of {', '.join(SENSORS)}")
         side, value = _threshold(at, body, "kpa", "kPa (absolute)")
+        lo, hi = _SENSED_PA[0] / 1e3, _SENSED_PA[1] / 1e3
+        if not lo <= value <= hi:  # a threshold the sensor can never read ends nothing
+            raise ParamError(
+                f"{at}.{side}_kpa", value, f"[{lo:g}, {hi:g}] kPa absolute (the sensors' range)"
+            )
         return {"kind": "pressure", "sensor": sensor, "side": side, "value": value * 1e3}
     _no_unknown(at, body, {"above_n", "below_n"})
     side, value = _threshold(at, body, "n", "N")
+    if not abs(value) <= _FORCE_MAX_N:
+        raise ParamError(
+            f"{at}.{side}_n",
+            value,
+            f"[{-_FORCE_MAX_N:.4g}, {_FORCE_MAX_N:.4g}] N (the sensors' full scale on the piston)",
+        )
     return {"kind": "force", "side": side, "value": value}
+
+
+def _sensed() -> tuple[tuple[float, float], float]:
+    """The absolute pressures the sensors read (Huba 511: ambient to ambient + full scale) and
+    the largest rod force they can show (full scale on the larger piston area)."""
+    from pneu_sim.physics.params import PlantParams
+
+    p = PlantParams()
+    p_a, fs = p.ambient.p_a, p.sensors.pressure.fs
+    return (p_a, p_a + fs), (p_a + fs) * p.linear.A_c1
+
+
+_SENSED_PA, _FORCE_MAX_N = _sensed()
 
 
 def _threshold(at: str, body: Mapping, suffix: str, unit: str) -> tuple[str, float]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import mmap
 import os
+import stat
 import struct
 import zlib
 from collections.abc import Iterator
@@ -107,11 +108,22 @@ class McapFile:
 
     def __init__(self, path: str | os.PathLike) -> None:
         self.path = str(path)
-        try:
-            self._f = open(self.path, "rb")
+        try:  # non-blocking open: a pipe without a writer is refused below, never waited on
+            fd = os.open(self.path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
         except OSError as e:
             raise NotMcapError(self.path, f"cannot open: {e.strerror}") from None
-        self.size = os.fstat(self._f.fileno()).st_size
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            os.close(fd)
+            raise NotMcapError(
+                self.path, "not a regular file (a directory, device, pipe or socket)"
+            )
+        os.set_blocking(fd, True)
+        self._f = os.fdopen(fd, "rb")
+        self.size = st.st_size
+        from pneu_msgs_py.params.inputs import note_input
+
+        note_input(self.path, st)  # no output of the command may replace it
         self.schemas: dict[int, M.Schema] = {}
         self.channels: dict[int, M.Channel] = {}
         self.metadata: dict[str, dict[str, str]] = {}

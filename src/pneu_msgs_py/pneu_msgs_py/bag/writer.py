@@ -410,8 +410,12 @@ class BagWriter:
         if self._closed:
             return
         self._closed = True
-        self._mcap.close()
-        self._mcap.partial_path.unlink(missing_ok=True)
+        try:
+            self._mcap.close()
+        except OSError:  # a full disk fails the last flush: the partial goes all the same
+            pass
+        finally:
+            self._mcap.partial_path.unlink(missing_ok=True)
 
     def close(self) -> None:
         """Write the last chunk and the summary, rename ``.partial`` to the bag; idempotent."""

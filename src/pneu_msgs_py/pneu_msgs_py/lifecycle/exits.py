@@ -6,6 +6,7 @@ import signal
 
 __all__ = [
     "BAD_INPUT",
+    "CommandFailed",
     "EXIT_CODES",
     "OK",
     "RUNTIME_ERROR",
@@ -17,6 +18,11 @@ OK = 0
 RUNTIME_ERROR = 1  # the command failed while running (disk full, an internal error)
 BAD_INPUT = 2  # an argument, a config file or an input bag refused before anything was written
 SAFETY_STOP = 3  # the run completed, but the supervisor took an axis safe (or detected a fault)
+
+
+class CommandFailed(RuntimeError):
+    """The command failed while running for a reason its message says in one line (exit 1,
+    :data:`RUNTIME_ERROR`; not an internal error): a lost worker, a cluster that went away."""
 
 
 def interrupted_code(signum: int) -> int:

@@ -16,20 +16,100 @@ The rules (every command that writes follows them, docs/cli.md repeats them):
    ``pneu recover run.mcap.partial --out run.mcap``).
 4. With ``overwrite``, the artefacts this command writes (and their partials)
    are removed when the claim is taken; other files are left alone.
+5. **Writable, and not anything else.** The check refuses an empty path, a
+   location under a file, one that cannot be written (permissions, a read-only
+   file system) or is full (less than :data:`MIN_FREE_BYTES` free), and an
+   existing output that is not a regular file (a device such as ``/dev/full``,
+   a pipe, a directory): ``--overwrite`` replaces a file pneu could have written,
+   nothing else. So a long command (a fit, a sweep) never finds out at its end.
+6. **Never an input.** Besides the inputs a command names, every file it has read
+   (:mod:`pneu_msgs_py.params.inputs`: config files, waypoint tables, bags, tasks) is refused as an
+   output, by identity (a link or another spelling is the same file).
 """
 
 from __future__ import annotations
 
 import os
+import stat
 from collections.abc import Iterable
 from pathlib import Path
 
 from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.inputs import is_input
 
-__all__ = ["LOCK_NAME", "PARTIAL", "OutputDir", "OutputFile", "is_same_path"]
+__all__ = ["LOCK_NAME", "MIN_FREE_BYTES", "PARTIAL", "OutputDir", "OutputFile", "is_same_path"]
 
 LOCK_NAME = ".pneu.lock"
 PARTIAL = ".partial"
+MIN_FREE_BYTES = 2**20  # a location with less free space is full (the smallest output is kB)
+
+
+def _check_text(path: str | os.PathLike, field: str) -> None:
+    if not os.fspath(path).strip():
+        raise ParamError(field, os.fspath(path), "a path (not empty: '' is not '.')")
+
+
+def _check_names(p: Path, q: Path, field: str, shown: str, longest: str = "") -> None:
+    """Every name of ``p`` to be created under ``q`` (and ``longest``, the longest file name
+    to be written in ``p``) fits the file system's name length."""
+    try:
+        name_max = os.pathconf(q, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        name_max = 255
+    new = [part for part in p.relative_to(q).parts] if p != q else []
+    for name in (*new, longest):
+        if len(os.fsencode(name)) > name_max:
+            raise ParamError(
+                field, shown, f"names of at most {name_max} bytes ({name[:40]}... is longer)"
+            )
+
+
+def _check_location(p: Path, field: str, shown: str, longest: str = "") -> None:
+    """``p`` (a directory to write in, existing or to be created) can be written, and its new
+    names (with ``longest``, the longest file name written in it) are not too long."""
+    q = p
+    while not os.path.lexists(q) and q != q.parent:
+        q = q.parent
+    if not q.is_dir():
+        what = "is a file" if q.is_file() else "is not a directory"
+        raise ParamError(field, shown, f"a location under a directory ({q} {what})")
+    _check_names(p, q, field, shown, longest)
+    if not os.access(q, os.W_OK | os.X_OK):
+        raise ParamError(field, shown, f"a writable location ({q}: permission denied)")
+    try:
+        fs = os.statvfs(q)
+    except OSError:
+        return
+    if fs.f_flag & os.ST_RDONLY:
+        raise ParamError(field, shown, f"a writable location ({q} is on a read-only file system)")
+    free = fs.f_bavail * fs.f_frsize
+    if free < MIN_FREE_BYTES:
+        raise ParamError(
+            field,
+            shown,
+            f"a location with free space (at least {MIN_FREE_BYTES // 2**20} MiB; "
+            f"{free} bytes free on {q}'s file system)",
+        )
+
+
+def _check_replaceable(f: Path, field: str, shown: str) -> None:
+    """An existing output ``f`` is a file pneu could have written (or a link): never a
+    device, pipe, socket or directory."""
+    try:
+        mode = os.lstat(f).st_mode
+    except OSError:
+        return
+    if not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
+        kind = "a directory" if stat.S_ISDIR(mode) else "a device, pipe or socket"
+        raise ParamError(field, shown, f"a path for a regular file ({f} is {kind}: never replaced)")
+
+
+def _input_named(f: Path, inputs: Iterable[str | os.PathLike]) -> str | None:
+    """The input (named, or read by the command) ``f`` is, if any."""
+    for inp in inputs:
+        if is_same_path(f, inp):
+            return str(inp)
+    return is_input(f)
 
 
 def _resolved(p: str | os.PathLike) -> Path:
@@ -104,17 +184,21 @@ class OutputDir:
     def check(self) -> OutputDir:
         """Refuse (ParamError naming the option) before anything is created."""
         p = self.path
+        _check_text(p, self.field)
         if p.exists() and not p.is_dir():
             raise ParamError(self.field, str(p), "a directory (this is a file)")
-        for inp in self.inputs:
-            for name in (*self.artefacts, *(a + PARTIAL for a in self.artefacts)):
-                if is_same_path(p / name, inp):
-                    raise ParamError(
-                        self.field,
-                        str(p),
-                        f"a directory whose outputs are not inputs of the command ({inp} would "
-                        f"be replaced by {name})",
-                    )
+        for name in (*self.artefacts, *(a + PARTIAL for a in self.artefacts)):
+            inp = _input_named(p / name, self.inputs)
+            if inp is not None:
+                raise ParamError(
+                    self.field,
+                    str(p),
+                    f"a directory whose outputs are not inputs of the command ({inp} would "
+                    f"be replaced by {name})",
+                )
+            _check_replaceable(p / name, self.field, str(p))
+        longest = max((a + PARTIAL for a in self.artefacts), key=len, default="")
+        _check_location(p, self.field, str(p), longest)
         held = self._holdings() if p.is_dir() else []
         if held and not self.overwrite:
             listed = ", ".join(held[:6]) + (", ..." if len(held) > 6 else "")
@@ -211,19 +295,23 @@ class OutputFile:
 
     def check(self) -> OutputFile:
         p = self.path
+        _check_text(p, self.field)
         if not p.name or p.is_dir() or str(p).endswith(os.sep):
             raise ParamError(self.field, str(p), "a file name (this is a directory)")
         if self.suffixes and p.suffix.lower() not in self.suffixes:
             raise ParamError(
                 self.field, str(p), "a file name ending in " + " or ".join(self.suffixes)
             )
-        for inp in self.inputs:
-            if is_same_path(p, inp) or is_same_path(p.parent / (p.name + PARTIAL), inp):
+        for f in (p, p.parent / (p.name + PARTIAL)):
+            inp = _input_named(f, self.inputs)
+            if inp is not None:
                 raise ParamError(
                     self.field, str(p), f"a file that is not one of the command's inputs ({inp})"
                 )
+            _check_replaceable(f, self.field, str(p))
         if (p.exists() or p.is_symlink()) and not self.overwrite:
             raise ParamError(self.field, str(p), "a new file, or --overwrite to replace it")
+        _check_location(p.parent, self.field, str(p), self._lock_path.name)
         return self
 
     def __enter__(self) -> OutputFile:

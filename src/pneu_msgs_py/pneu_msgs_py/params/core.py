@@ -23,7 +23,7 @@ import functools
 import math
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +31,8 @@ __all__ = [
     "MISSING",
     "ParamError",
     "ParamSpec",
+    "shown",
+    "unknown_key",
     "param",
     "validate",
     "from_dict",
@@ -51,10 +53,47 @@ class _Missing:
 MISSING = _Missing()
 
 
+SHOWN_CHARS = 200  # a refused value is shown up to this long (a path fits): one short line
+
+
+def shown(value: Any) -> str:
+    """``value`` as a refusal shows it: its repr, a mapping or list by its size and first
+    keys (never a whole YAML tree), long text cut to :data:`SHOWN_CHARS` characters."""
+    if isinstance(value, Mapping):
+        keys = ", ".join(str(k) for k in list(value)[:4]) + (", ..." if len(value) > 4 else "")
+        text = f"a mapping ({len(value)} key{'s' * (len(value) != 1)}: {keys})"
+    elif isinstance(value, (list, tuple)) and len(repr(value)) > SHOWN_CHARS:
+        text = f"a list of {len(value)} items"
+    else:
+        text = repr(value)
+    if len(text) > SHOWN_CHARS:
+        quote = text[0] if text[0] in "'\"" else ""
+        text = text[: SHOWN_CHARS - 4] + "..." + quote
+    return text
+
+
+def unknown_key(key: Any, known: Iterable[str], shown_chars: int = 80) -> str:
+    """The ``allowed`` text for an unknown key: the close names first, then the known ones
+    (as many as fit in ``shown_chars``, the count said): one short line for any group."""
+    import difflib
+
+    known = list(known)
+    close = difflib.get_close_matches(str(key), known, n=3, cutoff=0.6)
+    names: list[str] = []
+    for name in known:
+        if names and len(", ".join([*names, name])) > shown_chars:
+            break
+        names.append(name)
+    listed = ", ".join(names) + (f", ... ({len(known)} in all)" if len(names) < len(known) else "")
+    hint = f"; did you mean {' or '.join(close)}?" if close else ""
+    return f"no such parameter{hint}; known: {listed}"
+
+
 class ParamError(ValueError):
     """A parameter value was refused; the message names the key, value and range.
 
     ``value`` :data:`MISSING`: the key is required and absent (``key: missing; required: ...``).
+    The value is shown short (:func:`shown`): one line, whatever was refused.
     """
 
     def __init__(self, key: str, value: Any, allowed: str):
@@ -64,7 +103,7 @@ class ParamError(ValueError):
         if value is MISSING:
             super().__init__(f"{key}: missing; required: {allowed}")
         else:
-            super().__init__(f"{key}: {value!r} refused; allowed: {allowed}")
+            super().__init__(f"{key}: {shown(value)} refused; allowed: {allowed}")
 
 
 def param(
@@ -248,9 +287,7 @@ def from_dict(cls: type, data: Mapping[str, Any], *, strict: bool = True, prefix
     names = {f.name: f for f in dataclasses.fields(cls)}
     for key in data:
         if key not in names:
-            raise ParamError(
-                f"{prefix}{key}", data[key], "no such parameter; known: " + ", ".join(names)
-            )
+            raise ParamError(f"{prefix}{key}", data[key], unknown_key(key, names))
     kwargs: dict[str, Any] = {}
     for name, f in names.items():
         key = f"{prefix}{name}"

@@ -7,38 +7,33 @@ arguments; ``--set KEY=VALUE`` values are read like the values here.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from typing import Any
 
-import yaml
-
 from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.yaml_file import read_scalar
 
 __all__ = ["parse_spec", "parse_value"]
 
 
 def parse_value(text: str) -> Any:
-    """A value as YAML would read it (``1`` int, ``1.0`` float, ``true`` bool, ``pid`` str).
-
-    YAML 1.1 reads ``3e5`` as a string; a user means the number, so a string
-    that parses as a float is one.
+    """A value as the config files' reader reads it (``1`` int, ``1.0`` and ``3e5`` float,
+    ``true`` bool, ``pid`` str), as the user typed it: ``010`` is the decimal 10, ``0x10``
+    16; ``1:00``, ``1_000``, ``yes`` stay strings (YAML 1.1 would read 60, 1000, true), so a
+    number or boolean field refuses them (:func:`pneu_msgs_py.params.yaml_file.read_scalar`).
     """
-    try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError:
-        value = text.strip()
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return value
+    return read_scalar(text)
 
 
-def parse_spec(text: str, field: str) -> tuple[str, dict[str, Any]]:
-    """``KIND[:key=value,...]`` -> ``(KIND, {key: value})``; ``field`` names the option in errors.
+def parse_spec(
+    text: str, field: str, keys: Collection[str] | None = None
+) -> tuple[str, dict[str, Any]]:
+    """``KIND[:key=value,...]`` -> ``(KIND, {key: value})``; ``field`` names the option in errors;
+    ``keys``: the only keys allowed (None: any, checked by the caller).
 
     Refused with one :class:`ParamError` line: an empty kind, an item without
-    ``=`` or without a key, and a key given twice.
+    ``=`` or without a key, a key given twice, and a key ``kind`` (the kind is the
+    part before ``:``; a ``kind=`` inside would silently replace it).
     """
     kind, _, rest = text.strip().partition(":")
     kind = kind.strip()
@@ -52,5 +47,11 @@ def parse_spec(text: str, field: str) -> tuple[str, dict[str, Any]]:
             raise ParamError(f"{field} {kind}", part, "key=value")
         if key in out:
             raise ParamError(f"{field} {kind}", key, "each key once")
+        if keys is not None and key not in keys:
+            raise ParamError(f"{field} {kind}", key, "one of " + ", ".join(keys))
+        if key == "kind":
+            raise ParamError(
+                f"{field} {kind}", part, f"no key 'kind': the kind is written before ':' ({kind})"
+            )
         out[key] = parse_value(value)
     return kind, out

@@ -10,6 +10,12 @@
   ``config/plant.yaml:12:5: linear.M: -0.28 refused; allowed: (0, 100] kg``.
 
 Lines and columns are 1-based, as editors show them.
+
+Plain scalars are read as the user typed them: the YAML 1.2 core schema, not
+PyYAML's YAML 1.1 (ROS 2's own YAML reader is 1.2 as well). ``010`` is the
+decimal 10 (YAML 1.1: octal 8), ``0o10`` 8, ``0x10`` 16, ``1e5`` a float; ``1:00``
+(1.1: sexagesimal 60), ``1_000``, ``yes``/``on``/``off`` (1.1: booleans) and
+dates stay strings, which a number or boolean field then refuses.
 """
 
 from __future__ import annotations
@@ -19,13 +25,13 @@ import os
 import re
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import yaml
 
 from pneu_msgs_py.params.core import ParamError
 
-__all__ = ["ConfigFileError", "MarkedDict", "from_option", "load_yaml", "located"]
+__all__ = ["ConfigFileError", "MarkedDict", "from_option", "load_yaml", "located", "read_scalar"]
 
 
 class ConfigFileError(ParamError):
@@ -78,9 +84,11 @@ def _pos(mark: Any) -> tuple[int, int]:
 
 
 class _StrictLoader(yaml.SafeLoader):
-    """SafeLoader that refuses duplicate keys and returns :class:`MarkedDict` mappings."""
+    """SafeLoader that refuses duplicate keys, returns :class:`MarkedDict` mappings and reads
+    plain scalars by the YAML 1.2 core schema (see the module docstring)."""
 
     path = ""
+    yaml_implicit_resolvers: ClassVar[dict] = {}  # filled below: the core schema, not YAML 1.1's
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> MarkedDict:
         if not isinstance(node, yaml.MappingNode):
@@ -131,20 +139,62 @@ def _construct_map(loader: _StrictLoader, node: yaml.MappingNode) -> Iterator[Ma
 
 _StrictLoader.add_constructor("tag:yaml.org,2002:map", _construct_map)
 
+# the YAML 1.2 core schema (https://yaml.org/spec/1.2.2/#1032-tag-resolution)
+_CORE = (
+    ("tag:yaml.org,2002:null", r"^(?:~|null|Null|NULL|)$", "~nN"),
+    ("tag:yaml.org,2002:bool", r"^(?:true|True|TRUE|false|False|FALSE)$", "tTfF"),
+    ("tag:yaml.org,2002:int", r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$", "-+0123456789"),
+    (
+        "tag:yaml.org,2002:float",
+        r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+        r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$",
+        "-+.0123456789",
+    ),
+    ("tag:yaml.org,2002:merge", r"^<<$", "<"),
+)
+for _tag, _regexp, _first in _CORE:
+    _StrictLoader.add_implicit_resolver(_tag, re.compile(_regexp), list(_first))
+_StrictLoader.add_implicit_resolver("tag:yaml.org,2002:null", re.compile(r"^$"), [""])
+
+
+def _construct_int(loader: _StrictLoader, node: yaml.ScalarNode) -> int:
+    """Decimal as typed (``010`` is 10), ``0o`` octal, ``0x`` hexadecimal."""
+    text = loader.construct_scalar(node)
+    if text.startswith("0o"):
+        return int(text[2:], 8)
+    if text.startswith("0x"):
+        return int(text[2:], 16)
+    return int(text, 10)
+
+
+def _construct_float(loader: _StrictLoader, node: yaml.ScalarNode) -> float:
+    text = loader.construct_scalar(node).lower()
+    if text.endswith(".inf"):
+        return float(text.replace(".inf", "inf"))
+    if text == ".nan":
+        return float("nan")
+    return float(text)
+
+
+_StrictLoader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+_StrictLoader.add_constructor("tag:yaml.org,2002:float", _construct_float)
+# a tree read here can be written back (an identified plant.yaml keeps the base file's leaves)
+yaml.SafeDumper.add_representer(MarkedDict, yaml.SafeDumper.represent_dict)
+
 
 def load_yaml(path: str | os.PathLike) -> Any:
     """Parse ``path`` strictly (see the module docstring); ``None`` for an empty file.
 
     Raises :class:`ConfigFileError` (a :class:`ParamError`) for a missing or
-    unreadable file, text that is not UTF-8, a syntax error or a duplicate key.
+    unreadable file, a directory, device or pipe, a file over 64 MiB, text that is not UTF-8, a syntax error or a duplicate key.
     """
+    from pneu_msgs_py.params.inputs import UnreadableInput, read_input
+
     p = Path(path)
     try:
-        text = p.read_bytes()
-    except IsADirectoryError:
-        raise ConfigFileError(p, "is a directory, not a YAML file") from None
-    except OSError as err:
-        raise ConfigFileError(p, f"cannot read: {err.strerror or err}") from None
+        text = read_input(p)  # a regular file of bounded size, remembered as an input
+    except UnreadableInput as err:
+        raise ConfigFileError(p, err.problem) from None
     try:
         decoded = text.decode("utf-8")
     except UnicodeDecodeError as err:
@@ -164,6 +214,18 @@ def load_yaml(path: str | os.PathLike) -> Any:
         raise ConfigFileError(p, _one_line(str(err))) from None
     except RecursionError:
         raise ConfigFileError(p, "nested too deeply") from None
+    finally:
+        loader.dispose()
+
+
+def read_scalar(text: str) -> Any:
+    """One value as this reader reads it in a file (YAML 1.2 core schema: ``010`` is 10,
+    ``1:00`` a string); text YAML cannot parse (``a: b: c``) is the string itself."""
+    loader = _StrictLoader(text)
+    try:
+        return loader.get_single_data()
+    except (yaml.YAMLError, ConfigFileError):
+        return text.strip()
     finally:
         loader.dispose()
 

@@ -14,6 +14,9 @@ from typing import Any
 
 from pneu_msgs_py.live import PACES
 from pneu_msgs_py.live.server import DEFAULT_PORT  # foxglove is imported when a server starts
+from pneu_msgs_py.params.core import ParamError
+
+DEFAULT_HOST = "127.0.0.1"
 
 __all__ = ["add_arguments", "open_live"]
 
@@ -52,23 +55,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--live-host",
-        default="127.0.0.1",
+        default=None,
         metavar="HOST",
-        help="interface to serve on (default 127.0.0.1: this machine; 0.0.0.0: every interface)",
+        help="with --live: interface to serve on (default 127.0.0.1: this machine; 0.0.0.0: "
+        "every interface)",
     )
     g.add_argument(
         "--live-pace",
         choices=PACES,
-        default="realtime",
-        help="realtime: simulated time advances with the wall clock (default); "
+        default=None,
+        help="with --live: realtime: simulated time advances with the wall clock (default); "
         "fast: as fast as the run goes",
     )
     g.add_argument(
         "--live-wait",
         type=_wait,
-        default=0.0,
+        default=None,
         metavar="S",
-        help="wait up to S seconds for a viewer to subscribe before the run starts "
+        help="with --live: wait up to S seconds for a viewer to subscribe before the run starts "
         "(default 0: start at once; messages sent before a viewer subscribes are not kept)",
     )
 
@@ -80,31 +84,40 @@ def open_live(
 
     ``kind``: ``linear`` | ``rotary`` | ``both``, the Foxglove layout to suggest.
     """
+    given = [o for o, v in (("--live-host", args.live_host), ("--live-pace", args.live_pace),
+                            ("--live-wait", args.live_wait)) if v is not None]  # fmt: skip
     if args.live is None:
+        if given:  # an option of the live view without one would be silently ignored
+            raise ParamError(
+                given[0], getattr(args, given[0][2:].replace("-", "_")), "only with --live"
+            )
         return None
+    host = args.live_host if args.live_host is not None else DEFAULT_HOST
+    pace = args.live_pace if args.live_pace is not None else "realtime"
+    wait = args.live_wait if args.live_wait is not None else 0.0
     from pneu_msgs_py.live.server import LiveServer
     from pneu_msgs_py.params.paths import config_dir
 
     server = LiveServer(
         axes=axes,
         port=args.live,
-        host=args.live_host,
-        pace=args.live_pace,
+        host=host,
+        pace=pace,
         controller_state=controller_state,
     )
     layout = config_dir() / "layouts" / f"foxglove_{kind}.json"
     print(
-        f"live view: {server.url} ({args.live_pace}) -- Foxglove: Open connection > "
+        f"live view: {server.url} ({pace}) -- Foxglove: Open connection > "
         f"Foxglove WebSocket; layout: {layout}",
         file=sys.stderr,
         flush=True,
     )
-    if args.live_wait > 0:
+    if wait > 0:
         print(
-            f"live view: waiting up to {args.live_wait:g} s for a viewer",
+            f"live view: waiting up to {wait:g} s for a viewer",
             file=sys.stderr,
             flush=True,
         )
-        if not server.wait_for_viewer(args.live_wait):
+        if not server.wait_for_viewer(wait):
             print("live view: no viewer yet; starting the run", file=sys.stderr, flush=True)
     return server

@@ -2,7 +2,9 @@
 
 Writes ``sim.csv`` (SI columns: the sensor sample of every tick plus the true x and ω)
 and ``sim.png`` (displacement, speed, pressures), and prints the end position (mm)
-and the steady speed (rpm).
+and the steady speed (rpm). Interrupted (SIGINT, SIGTERM, SIGHUP), both hold what ran
+and say so: the CSV's last line is ``# interrupted by SIGINT at 4.000 s of 600 s: ...``
+(a comment line), the figure's title too.
 """
 
 from __future__ import annotations
@@ -145,6 +147,17 @@ def simulate(
     return rows[:m]
 
 
+def _write_csv(path: Path, rows, marker: str) -> None:
+    """``rows`` as CSV; ``marker`` (an interruption) as the last line, a ``#`` comment
+    (numpy's loadtxt and pandas' ``comment="#"`` skip it)."""
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(CSV_COLUMNS)
+        w.writerows([*r[:9].tolist(), int(r[9]), *r[10:].tolist()] for r in rows)
+        if marker:
+            fh.write(f"# {marker}: the rows above are what ran\n")
+
+
 def _plot(rows, path: Path, title: str) -> None:
     import matplotlib
 
@@ -203,15 +216,20 @@ def run(args: argparse.Namespace) -> int:
             if live is not None:
                 live.close()
                 live = None
-            with open(claim.partial("sim.csv"), "w", newline="", encoding="utf-8") as fh:
-                w = csv.writer(fh)
-                w.writerow(CSV_COLUMNS)
-                w.writerows([*r[:9].tolist(), int(r[9]), *r[10:].tolist()] for r in rows)
+            stopped = signals.pending()
+            marker = (
+                f"interrupted by {signals.signal_name(stopped)} at {rows[-1, 0]:.3f} s of "
+                f"{duration:g} s"
+                if stopped is not None
+                else ""
+            )
+            _write_csv(claim.partial("sim.csv"), rows, marker)
             claim.publish("sim.csv")
             if not args.no_plot:
                 title = (
                     f"pneu sim: u_linear {args.linear_voltage:g} V, u_rotary "
                     f"{args.rotary_voltage:g} V, seed {args.seed}"
+                    + (f" ({marker})" if marker else "")
                 )
                 _plot(rows, claim.partial("sim.png"), title)
                 claim.publish("sim.png")

@@ -43,6 +43,7 @@ from typing import Any
 from pneu_driver.daq.errors import LateCycleError
 from pneu_driver.daq.rig import RigParams
 from pneu_driver.daq.scaling import RawSample, ao_volts
+from pneu_msgs_py.lifecycle.duration import MAX_DURATION_S
 from pneu_msgs_py.params.core import ParamError
 
 from pneu_sim.daq_sim.card import CardRegister
@@ -198,16 +199,13 @@ OPTIONS: dict[str, tuple[type, Any, str]] = {
     "stall_at_s": (float, -1.0, "inject one program stall at this card time (< 0: none)"),
     "stall_ms": (float, 3.0, "length of that stall"),
 }
+_TYPE_NAMES = {int: "an integer", float: "a number", str: "a string"}
+SEED_MAX = 2**32 - 1  # numpy's SeedSequence takes it whole (as every pneu --seed)
 
 
-def make_backend(rig: RigParams, **options: Any) -> TwinDaq:
-    """``backend: sim[:seed=0,plant=...,card=...,stall_at_s=...,stall_ms=...]`` (entry point).
-
-    Unknown or mistyped options are refused with one line naming them.
-    """
-    from pneu_sim.physics.plant import Plant
-    from pneu_sim.physics.plant_file import load_plant
-
+def check_options(**options: Any) -> dict[str, Any]:
+    """Every option of ``sim[:...]`` with its default, checked: an unknown, mistyped or
+    out-of-range one is refused with one line naming it (nothing is opened)."""
     values: dict[str, Any] = {}
     for key, value in options.items():
         if key not in OPTIONS:
@@ -218,14 +216,41 @@ def make_backend(rig: RigParams, **options: Any) -> TwinDaq:
         if typ is str and not isinstance(value, str):
             value = str(value)
         if not isinstance(value, typ) or isinstance(value, bool):
-            raise ParamError(f"backend sim {key}", value, f"a {typ.__name__}")
+            raise ParamError(f"backend sim {key}", value, _TYPE_NAMES[typ])
         values[key] = value
     opt = {k: values.get(k, d) for k, (_t, d, _s) in OPTIONS.items()}
-    if opt["seed"] < 0:
-        raise ParamError("backend sim seed", opt["seed"], "an integer >= 0")
-    if not opt["stall_ms"] > 0.0:
-        raise ParamError("backend sim stall_ms", opt["stall_ms"], "(0, inf) ms")
+    if not 0 <= opt["seed"] <= SEED_MAX:
+        raise ParamError("backend sim seed", opt["seed"], f"an integer in [0, {SEED_MAX}]")
+    cap = MAX_DURATION_S  # a stall after the longest run, or longer than it, never happens
+    if not (opt["stall_at_s"] < 0.0 or opt["stall_at_s"] <= cap):
+        raise ParamError(
+            "backend sim stall_at_s", opt["stall_at_s"], f"< 0 (no stall) or [0, {cap:g}] s"
+        )
+    if not 0.0 < opt["stall_ms"] <= cap * 1e3:
+        raise ParamError(
+            "backend sim stall_ms", opt["stall_ms"], f"(0, {cap * 1e3:g}] ms (the duration cap)"
+        )
+    if opt["plant"]:  # read (strictly) now: refused before anything is opened
+        from pneu_msgs_py.params.yaml_file import from_option
+
+        from pneu_sim.physics.plant_file import load_plant
+
+        with from_option("backend sim plant"):
+            load_plant(opt["plant"])
+    return opt
+
+
+def make_backend(rig: RigParams, **options: Any) -> TwinDaq:
+    """``backend: sim[:seed=0,plant=...,card=...,stall_at_s=...,stall_ms=...]`` (entry point;
+    its options checked by :func:`check_options`, also before anything is opened)."""
+    from pneu_sim.physics.plant import Plant
+    from pneu_sim.physics.plant_file import load_plant
+
+    opt = check_options(**options)
     plant = Plant(load_plant(opt["plant"] or None), seed=opt["seed"])
     stalls = [(opt["stall_at_s"], opt["stall_ms"] * 1e-3)] if opt["stall_at_s"] >= 0.0 else []
     card = CardRegister(opt["card"] or None)
     return TwinDaq(rig, plant, card=card, stalls=stalls)
+
+
+make_backend.check_options = check_options  # pneu_driver.daq.backends.check_backend

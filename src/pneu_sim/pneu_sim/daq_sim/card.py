@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import mmap
 import os
+import stat
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -70,6 +71,7 @@ class CardRegister:
             self._mm = mmap.mmap(-1, SIZE)
             self._power_up()
             return
+        self._refuse_foreign(self.path)
         fresh = not self.path.exists() or self.path.stat().st_size != SIZE
         fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
@@ -86,6 +88,40 @@ class CardRegister:
                 f"card file {self.path}: version {version} refused; allowed: {_VERSION} "
                 "(delete the file: a new card powers up at 0 V)"
             )
+
+    @staticmethod
+    def _refuse_foreign(path: Path) -> None:
+        """An existing file that is not a card register (another file of the user's, a bag,
+        a device) is never truncated into one: refused with one line. An empty file is a
+        card that never powered up."""
+        from pneu_msgs_py.params.core import ParamError
+
+        try:
+            st = os.stat(path)
+        except FileNotFoundError:
+            return
+        except OSError as err:
+            raise ParamError(
+                "backend sim card", str(path), f"a card file ({err.strerror})"
+            ) from None
+        why = ""
+        if not stat.S_ISREG(st.st_mode):
+            why = "not a regular file"
+        elif st.st_size:
+            with open(path, "rb") as fh:
+                head = fh.read(_LAYOUT.size)
+            if len(head) < _LAYOUT.size or _LAYOUT.unpack_from(head, 0)[0] != _MAGIC:
+                why = "it holds something else"
+        if why:
+            raise ParamError(
+                "backend sim card",
+                str(path),
+                f"a new file or the card file of an earlier run ({why}: never overwritten)",
+            )
+        from pneu_msgs_py.params.inputs import is_input
+
+        if is_input(path):
+            raise ParamError("backend sim card", str(path), "a file that is not an input")
 
     def _power_up(self) -> None:
         _LAYOUT.pack_into(

@@ -22,7 +22,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pneu_msgs_py.params.core import MISSING, from_dict, to_dict, validate
+from pneu_msgs_py.params.core import MISSING, from_dict, to_dict, unknown_key, validate
 from pneu_msgs_py.params.paths import config_file
 from pneu_msgs_py.params.yaml_file import load_yaml, located
 
@@ -58,7 +58,7 @@ def _strip(cls: type, tree: Any, prefix: str, unc: PlantRanges) -> dict[str, Any
         f = fields.get(key)
         name = f"{prefix}{key}"
         if f is None:
-            raise PlantConfigError(name, node, "no such parameter; known: " + ", ".join(fields))
+            raise PlantConfigError(name, node, unknown_key(key, fields))
         tp = hints[key]
         if isinstance(tp, type) and dataclasses.is_dataclass(tp):
             out[key] = _strip(tp, node, f"{name}.", unc)

@@ -1,0 +1,345 @@
+"""The second round of hostile inputs (issue 22, part 4), each at its cause.
+
+Every refusal is one line ``pneu CMD: error: FIELD: ...`` naming the field and the true
+allowed range, exit 2, and nothing written; inputs are never lost to ``--overwrite``;
+interrupted outputs say so. The property test (test_property.py) throws generated
+inputs at the same rules; these are the cases that were found, as a user would type them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import io
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import pytest
+from pneu_control.cli.main import main
+from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.paths import config_file
+from pneu_msgs_py.params.spec import parse_spec, parse_value
+
+_spec = importlib.util.spec_from_file_location("_proc", Path(__file__).with_name("_proc.py"))
+P = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(P)
+
+RUN = ["run", "--axis", "linear", "--controller", "pid", "--duration", "0.05"]
+MAX_LINE = 300  # an error line of reasonable length, whatever was refused (paths aside)
+
+
+def pneu(*argv: str) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with (
+        contextlib.redirect_stdout(out),
+        contextlib.redirect_stderr(err),
+        warnings.catch_warnings(),
+    ):
+        warnings.simplefilter("ignore")
+        rc = main([str(a) for a in argv])
+    return rc, out.getvalue(), err.getvalue()
+
+
+def refused(*argv: str, field: str, allowed: str = "") -> str:
+    """``pneu ARGV`` exits 2 with one short line naming ``field`` (and ``allowed``)."""
+    rc, _, err = pneu(*argv)
+    lines = [ln for ln in err.strip().splitlines() if not ln.startswith("pneu: warning:")]
+    assert rc == 2, (argv, rc, err)
+    assert len(lines) == 1 and lines[0].startswith(f"pneu {argv[0]}: error: "), (argv, err)
+    assert field in lines[0] and allowed in lines[0], (argv, lines[0])
+    assert len(re.sub(r"/[^\s',;)]+", "PATH", lines[0])) <= MAX_LINE, (argv, lines[0])
+    return lines[0]
+
+
+# ------------------------------------------------------------- values as typed
+def test_values_are_read_as_typed_not_as_yaml_1_1():
+    assert parse_value("010") == 10 and parse_value("0o10") == 8 and parse_value("0x10") == 16
+    assert parse_value("3e5") == 3e5 and parse_value("-1.5") == -1.5
+    for text in ("1:00", "1_000", "yes", "on", "2024-01-01"):  # YAML 1.1: 60, 1000, true, date
+        assert isinstance(parse_value(text), str), text
+
+
+def test_sexagesimal_refused_and_a_leading_zero_read_decimal(tmp_path):
+    refused(*RUN, "--out", tmp_path / "a", "--reference", "constant:value=1:00",
+            field="reference.value", allowed="a number")  # fmt: skip
+    assert not (tmp_path / "a").exists()
+    rc, _, err = pneu(*RUN, "--out", tmp_path / "b", "--reference", "constant:value=010")
+    assert rc in (0, 3), err
+    doc = json.loads((tmp_path / "b" / "metrics.json").read_text())
+    assert doc["config"]["controllers"]["linear"]["reference"]["value"] == 10.0  # not 8
+
+
+def test_a_config_file_reads_values_as_typed(tmp_path):
+    text = config_file("plant.yaml").read_text()
+    bad = tmp_path / "plant.yaml"
+    bad.write_text(text.replace("M: {value: ", "M: {value: 1:00, was: ", 1))
+    line = refused(*RUN, "--out", tmp_path / "o", "--plant", bad, field="--plant")
+    assert str(bad) in line
+
+
+def test_a_kind_key_inside_a_spec_is_refused(tmp_path):
+    with pytest.raises(ParamError, match="no key 'kind': the kind is written before ':'"):
+        parse_spec("sine:kind=constant", "--reference")
+    refused(*RUN, "--out", tmp_path / "o", "--reference", "sine:kind=constant",
+            field="--reference sine", allowed="no key 'kind'")  # fmt: skip
+    refused(*RUN, "--out", tmp_path / "o", "--fault", "noise_burst:kind=valve_stuck",
+            field="--fault noise_burst")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------ true ranges
+@pytest.mark.parametrize(
+    "reference, field, allowed",
+    [
+        ("sine:amplitude=5,frequency_hz=1e-300", "frequency_hz", "[1/600, "),
+        ("sine:amplitude=5,t0_s=1e300", "t0_s", "[0, 600] s"),
+        ("smooth_step:target=5,duration_s=1e300", "duration_s", "[0, 600] s"),
+        ("ramp:slope=1,duration_s=1e300", "duration_s", "[0, 600] s"),
+    ],
+)
+def test_absurd_frequencies_and_times_are_refused(tmp_path, reference, field, allowed):
+    refused(*RUN, "--out", tmp_path / "o", "--reference", reference, field=field, allowed=allowed)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "rows, allowed",
+    [("0,0\n1e-300,5\n1,5\n", "at least one sample period"), ("0,0\n1e300,5\n", "[0, 600] s")],
+)
+def test_waypoints_inside_the_cap_and_a_sample_apart(tmp_path, rows, allowed):
+    (tmp_path / "w.csv").write_text(rows)
+    refused(*RUN, "--out", tmp_path / "o", "--reference", f"waypoints:file={tmp_path / 'w.csv'}",
+            field="reference.file[1].t", allowed=allowed)  # fmt: skip
+
+
+def test_validate_min_fit_and_horizon_ranges(tmp_path):
+    bag = tmp_path / "none.mcap"  # the options are checked before any bag is read
+    refused("validate", bag, "--min-fit", "200", field="--min-fit", allowed="<= 100")
+    refused("validate", bag, "--horizon", "1e-300", field="--horizon", allowed="[0.01, 600] s")
+
+
+def test_paper_uncertainty_capped_like_a_sweep(tmp_path):
+    refused("paper", "--out", tmp_path / "o", "--uncertainty", "10001", "--only",
+            "smooth_step_eq38", field="--uncertainty", allowed="[0, 10000]")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+# -------------------------------------------------------------- empty and alone
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["excite", "--axis", "linear", "--level", "quick", "--out", ""],
+        [*RUN, "--out", " "],
+        [*RUN, "--out", "o", "--plant", ""],
+        [*RUN, "--out", "o", "--reference", ""],
+        ["identify", "", "--out", "p.yaml"],
+    ],
+)
+def test_an_empty_value_is_refused_never_read_as_the_current_directory(tmp_path, argv):
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        refused(*argv, field="argument", allowed="a value that is not empty")
+    finally:
+        os.chdir(cwd)
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("option, value", [("--live-wait", "5"), ("--live-pace", "fast"),
+                                           ("--live-host", "0.0.0.0")])  # fmt: skip
+def test_live_view_options_only_with_live(tmp_path, option, value):
+    refused(*RUN, "--out", tmp_path / "o", option, value, field=option, allowed="only with --live")
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_error_about_a_wrong_file_is_one_short_line(tmp_path):
+    line = refused("sim", "--duration", "0.05", "--out", tmp_path / "o", "--no-plot",
+                   "--plant", config_file("controllers.yaml"), field="--plant")  # fmt: skip
+    assert "linear_controller" in line and "ros__parameters': {" not in line
+
+
+# ------------------------------------------------------------- nothing is lost
+def test_an_input_inside_the_output_is_never_deleted_by_overwrite(tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    wp = out / "metrics.json"
+    wp.write_text("0,0\n1,5\n")
+    refused(*RUN, "--out", out, "--overwrite", "--reference", f"waypoints:file={wp}",
+            field="--out", allowed="not inputs of the command")  # fmt: skip
+    assert wp.read_text() == "0,0\n1,5\n" and sorted(p.name for p in out.iterdir()) == [
+        "metrics.json"
+    ]
+    task = out / "task_report.md"  # a task file named like one of pneu task's reports
+    task.write_text("segments:\n  - dwell: {duration_s: 0.05}\n")
+    refused("task", task, "--out", out, "--overwrite", field="--out", allowed="not inputs")
+    assert task.exists()
+
+
+def test_an_output_that_is_a_device_or_pipe_is_never_replaced(tmp_path):
+    fifo = tmp_path / "fifo.mcap"
+    os.mkfifo(fifo)
+    refused("recover", tmp_path / "in.mcap", "--out", fifo, "--overwrite", field="--out",
+            allowed="a path for a regular file")  # fmt: skip
+    assert fifo.is_fifo()
+    refused("analyze", fifo, field=str(fifo), allowed="")  # an input pipe: never waited on
+    refused(*RUN, "--out", tmp_path / "o", "--plant", fifo, field="not a regular file")
+
+
+def test_identify_refuses_the_same_bag_twice_and_an_unwritable_output_before_the_fit(tmp_path):
+    bag = tmp_path / "exb"
+    bag.mkdir()
+    (bag / "run.mcap").write_bytes(b"")  # checked before any bag is read
+    refused("identify", bag, bag / "run.mcap", "--out", tmp_path / "p.yaml", field="BAG",
+            allowed="each bag once")  # fmt: skip
+    (tmp_path / "f").write_text("")
+    refused("identify", bag, "--out", tmp_path / "f" / "p.yaml", field="--out",
+            allowed="a location under a directory")  # fmt: skip
+    if os.geteuid() != 0:  # root writes anywhere: a mode bit refuses nothing
+        ro = tmp_path / "ro"
+        ro.mkdir(mode=0o555)
+        refused("identify", bag, "--out", ro / "p.yaml", field="--out", allowed="writable")
+
+
+def test_full_and_read_only_locations_are_refused_first(tmp_path, monkeypatch):
+    real = os.statvfs
+
+    class Fs:
+        def __init__(self, path, **kw):
+            st = real(path)
+            for k in ("f_bsize", "f_blocks", "f_files"):
+                setattr(self, k, getattr(st, k))
+            self.f_frsize, self.f_bavail = st.f_frsize, kw.get("bavail", st.f_bavail)
+            self.f_flag = kw.get("flag", st.f_flag)
+
+    monkeypatch.setattr(os, "statvfs", lambda p: Fs(p, bavail=0))
+    refused(*RUN, "--out", tmp_path / "o", field="--out", allowed="a location with free space")
+    monkeypatch.setattr(os, "statvfs", lambda p: Fs(p, flag=os.ST_RDONLY))
+    refused(*RUN, "--out", tmp_path / "o", field="--out", allowed="read-only file system")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_tree_read_by_the_strict_reader_dumps_back():
+    """identify on a one-axis bag keeps the other axis's leaves as read (MarkedDicts, with
+    their alternatives): they write back (the RepresenterError after a whole fit)."""
+    from pneu_msgs_py.params.yaml_file import load_yaml
+    from pneu_sim.physics.plant_file import params_from_tree, plant_tree_yaml
+
+    tree = load_yaml(config_file("plant.yaml"))
+    text = plant_tree_yaml(tree, ["# test"])
+    assert "alternatives: {gauge: " in text
+    import yaml
+
+    params_from_tree(yaml.safe_load(text))
+
+
+def test_validate_refuses_a_bag_with_nothing_to_compare(tmp_path):
+    """Open loop from the first sample needs valid samples from the first: a run whose
+    supervisor acted at once has none; refused naming the bag, nothing written."""
+    run = tmp_path / "run"
+    rc, _, err = pneu("run", "--axis", "linear", "--controller", "pid", "--duration", "0.3",
+                      "--fault", "controller_nan:start_s=0.02,duration_s=0.1", "--out", run)  # fmt: skip
+    assert rc in (0, 3), err
+    line = refused("validate", run, "--out", tmp_path / "v", field="BAG",
+                   allowed="a bag with a stretch to compare")  # fmt: skip
+    assert "--horizon" in line and not (tmp_path / "v").exists()
+
+
+# ------------------------------------------------------------------------ Dask
+def _dead_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]  # closed on exit: nothing listens there
+
+
+SWEEP = ["sweep", "--samples", "1", "--reference", "sine:amplitude=10,frequency_hz=1",
+         "--duration", "0.05", "--controller", "pid", "--gains", "retuned",
+         "--executor", "dask"]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "address, allowed",
+    [
+        ("garbage", "tcp://HOST:PORT"),
+        ("tcp://127.0.0.1:99999", "PORT in [1, 65535]"),
+        ("http://127.0.0.1:8786", "tcp://HOST:PORT"),
+        (None, "a running Dask scheduler"),
+    ],
+)
+def test_a_dask_address_is_checked_before_anything_is_written(tmp_path, address, allowed):
+    address = address or f"tcp://127.0.0.1:{_dead_port()}"
+    refused(*SWEEP, "--out", tmp_path / "o", "--address", address, field="--address",
+            allowed=allowed)  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+# -------------------------------------------------------------- interruptions
+def _wait_for_text(path: Path, text: str, proc: subprocess.Popen) -> None:
+    assert P.wait_for(
+        lambda: (
+            proc.poll() is not None or (path.exists() and text in path.read_text(errors="replace"))
+        )
+    ), path
+    assert proc.poll() is None, path.read_text()
+
+
+def test_sim_interrupted_says_so_in_its_csv(tmp_path):
+    err = tmp_path / "err.txt"
+    with open(err, "w") as fh:
+        proc = subprocess.Popen([*P.PNEU, "sim", "--duration", "600", "--out", tmp_path / "o",
+                                 "--no-plot"], stdout=subprocess.DEVNULL, stderr=fh,
+                                env=dict(os.environ, PYTHONUNBUFFERED="1"))  # fmt: skip
+        _wait_for_text(err, "steps", proc)  # the loop runs: its first progress line
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=300) == 130, err.read_text()
+    lines = (tmp_path / "o" / "sim.csv").read_text().splitlines()
+    assert lines[-1].startswith("# interrupted by SIGINT at ") and " of 600 s" in lines[-1]
+    assert len(lines) > 3 and not lines[-2].startswith("#")
+
+
+def test_paper_interrupted_in_its_uncertainty_stage_says_so(tmp_path):
+    out, err = tmp_path / "o", tmp_path / "err.txt"
+    with open(err, "w") as fh:
+        proc = subprocess.Popen([*P.PNEU, "paper", "--out", out, "--uncertainty", "50",
+                                 "--only", "smooth_step_eq38", "--no-plots", "--seeds", "1",
+                                 "--executor", "serial"], stdout=subprocess.DEVNULL, stderr=fh,
+                                env=dict(os.environ, PYTHONUNBUFFERED="1"))  # fmt: skip
+        # the nominal table is written (as one, under deferred signals) before the band stage
+        assert P.wait_for(lambda: (out / "paper_table.md").exists() or proc.poll() is not None)
+        assert proc.poll() is None, err.read_text()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=300) == 143, err.read_text()
+    doc = json.loads((out / "paper_table.json").read_text())
+    assert doc["uncertainty"]["status"] == "interrupted"
+    assert doc["uncertainty"]["signal"] == "SIGTERM" and doc["experiments"]
+    assert "## Over 50 plant samples: interrupted" in (out / "paper_table.md").read_text()
+    assert not (out / "uncertainty").exists()
+
+
+def test_a_full_disk_mid_run_is_one_line_and_leaves_no_partial(tmp_path):
+    """A write that fails (here a file-size limit, as a full disk fails it) ends the run
+    with one line, exit 1, and no half-written file."""
+    import resource
+
+    def limit() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # the write fails (EFBIG), no kill
+        resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+
+    out = tmp_path / "o"
+    proc = subprocess.run([*P.PNEU, "run", "--axis", "linear", "--controller", "pid",
+                           "--duration", "20", "--out", out], capture_output=True, text=True,
+                          preexec_fn=limit, timeout=600)  # fmt: skip
+    lines = [ln for ln in proc.stderr.splitlines() if "error" in ln]
+    assert proc.returncode == 1 and len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and "internal error" not in proc.stderr
+    assert not out.exists() or not [p for p in out.iterdir() if p.name.endswith(".partial")]
+
+
+if __name__ == "__main__":
+    sys.exit(pytest.main([__file__, "-q"]))
