@@ -23,7 +23,12 @@ import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch_ros.actions import Node
-from pneu_msgs_py.nodes.launch_graph import io_node, launch_description, logger_node
+from pneu_msgs_py.nodes.launch_graph import (
+    controller_node,
+    io_node,
+    launch_description,
+    logger_node,
+)
 
 ARGS = [
     ("task", "", "the task YAML (config/tasks/*.yaml; format: pneu_control/task/program.py)", None),
@@ -105,12 +110,9 @@ def _setup(arg: dict[str, str]) -> list:
             "rig", {**io_params, "rig_file": arg["rig_file"] or os.path.join(config, "rig.yaml")}
         )
     controllers = [
-        Node(
-            package="pneu_control",
-            executable=f"{axis}_controller",
-            name=f"{axis}_controller",
-            output="screen",
-            parameters=[
+        controller_node(
+            axis,
+            [
                 {
                     **values_to_overrides(prepared.spec.controllers[axis]),
                     "mode": mode,

@@ -28,6 +28,7 @@ __all__ = [
     "AXES_OF",
     "GAIN_FILES",
     "common_parameters",
+    "controller_node",
     "controller_and_logger_nodes",
     "controller_overrides",
     "hosted_manager",
@@ -151,8 +152,6 @@ def controller_and_logger_nodes(
     """One controller node per active axis (``deployment:=nodes``), the recorder and the logger."""
     import os
 
-    from launch_ros.actions import Node
-
     recorder = recorder_choice(arg, mode)
     bag = os.path.join(out, "bag" if recorder == "rosbag2" else "run.mcap")
     if os.path.exists(bag):  # a run is never overwritten
@@ -161,12 +160,9 @@ def controller_and_logger_nodes(
     if arg["deployment"] == "nodes":
         for axis in AXES_OF[arg["axes"]]:
             nodes.append(
-                Node(
-                    package="pneu_control",
-                    executable=f"{axis}_controller",
-                    name=f"{axis}_controller",
-                    output="screen",
-                    parameters=[
+                controller_node(
+                    axis,
+                    [
                         f"{config_dir}/{GAIN_FILES[arg['gains']]}",
                         controller_overrides(arg, axis, mode),
                     ],
@@ -176,6 +172,19 @@ def controller_and_logger_nodes(
         nodes.append(rosbag2_recorder(out, mode))
     nodes.append(logger_node(out, mode, recorder, common_parameters(arg)))
     return nodes
+
+
+def controller_node(axis: str, parameters: list) -> Any:
+    """The ``<axis>_controller`` node (its own process) with ``parameters`` (files, dicts)."""
+    from launch_ros.actions import Node
+
+    return Node(
+        package="pneu_control",
+        executable=f"{axis}_controller",
+        name=f"{axis}_controller",
+        output="screen",
+        parameters=parameters,
+    )
 
 
 def io_node(target: str, params: dict[str, Any], finished: str = "driver stopped") -> Any:
