@@ -307,6 +307,8 @@ def test_fatal_read_error_writes_safe_and_propagates():
 
 def test_command_slot_across_threads():
     slot = CommandSlot()
+    assert slot.put("linear", 3.0, 0) is False  # no sample taken yet: it answers none
+    slot.taken(5)
     assert slot.wait_fresh(("linear",), 5, 0.001) is False
     th = threading.Thread(target=lambda: (slot.put("linear", 3.0, 5), slot.put("rotary", 4.0, 5)))
     th.start()
@@ -315,6 +317,10 @@ def test_command_slot_across_threads():
     assert slot.put("linear", 9.0, 4) is False  # older than the newest seen
     assert sorted(slot.take()) == [("linear", 3.0, 5), ("rotary", 4.0, 5)]
     assert slot.take() == []
+    # a stamp after the newest sample is dropped, counted, and does not become the newest
+    assert slot.put("linear", 10.0, 10**15) is False
+    assert slot.future == {"linear": 2, "rotary": 0} and slot.take() == []
+    slot.taken(6)
     slot.put("linear", math.nan, 6)  # the supervisor decides what a NaN means, not the slot
     assert math.isnan(slot.take()[0][1])
     with pytest.raises(ValueError, match="axis"):

@@ -48,8 +48,8 @@ def _drive(th_a, s_a, d_a, f, c, volts, have, u, u_t, now, blocked, out_i, out_f
             th, s, d, t, f[k, 0], f[k, 1], f[k, 2], f[k, 3], c[k], vals, have[k]
         )
         out_i[k, 0] = keys
-        out_i[k, 1] = rules.command(s, 0, u[k, 0], u_t[k, 0])
-        out_i[k, 2] = rules.command(s, 1, u[k, 1], u_t[k, 1])
+        out_i[k, 1] = rules.command(th, s, 0, u[k, 0], u_t[k, 0])
+        out_i[k, 2] = rules.command(th, s, 1, u[k, 1], u_t[k, 1])
         out_i[k, 3] = rules.watchdog_faults(th, s, now[k])
         out_i[k, 4] = rules.update_zone(th, s, d)
         out_i[k, 5] = rules.sensor_key_axes(keys)
@@ -75,8 +75,8 @@ def _python(th, s, d, f, c, volts, have, u, u_t, now, blocked):
         vals = tuple(volts[k].tolist()) if have[k] else tuple(fk[:4])
         keys |= rules.sample_faults(th, s, d, t, *fk[:4], int(c[k]), vals, bool(have[k]))
         out_i[k, 0] = keys
-        out_i[k, 1] = rules.command(s, 0, float(u[k, 0]), int(u_t[k, 0]))
-        out_i[k, 2] = rules.command(s, 1, float(u[k, 1]), int(u_t[k, 1]))
+        out_i[k, 1] = rules.command(th, s, 0, float(u[k, 0]), int(u_t[k, 0]))
+        out_i[k, 2] = rules.command(th, s, 1, float(u[k, 1]), int(u_t[k, 1]))
         out_i[k, 3] = rules.watchdog_faults(th, s, int(now[k]))
         out_i[k, 4] = rules.update_zone(th, s, d)
         out_i[k, 5] = rules.sensor_key_axes(keys)
@@ -114,7 +114,7 @@ _step = st.tuples(
         # rotary: inside and beyond the stall band both ways, the centre, refused
         st.sampled_from([6.0, 5.0, 5.3, 5.31, 4.7, 4.69, 2.0, 10.0, math.nan]),
     ),
-    st.sampled_from([0, 0, 0, -3, 1]),  # command stamp offset [periods]: older, newer
+    st.sampled_from([0, 0, 0, -3, 1, -5, -6, 40]),  # stamp offset [periods]: older, future, expired
     st.sampled_from([1, 1, 1, 6, 30]),  # output tick [periods after the sample]
     st.tuples(st.integers(0, 1), st.integers(0, 1)),  # axis blocked (latched, e-stop)
 )

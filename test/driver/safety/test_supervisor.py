@@ -31,7 +31,7 @@ class Rig:
         self.rate = over.pop("rate", 0)  # counts per tick
         self.x = 0.0
 
-    def tick(self, raw_volts=None, u=(7.0, 6.0), command=True, **fields):
+    def tick(self, raw_volts=None, u=(7.0, 6.0), command=("linear", "rotary"), **fields):
         self.k += 1
         stamp = self.k * T_NS
         self.counts += fields.pop("dcounts", self.rate)
@@ -49,9 +49,8 @@ class Rig:
         )
         values.update(fields)
         self.sup.check_sample(SensorSample(**values), raw_volts)
-        if command:
-            self.sup.command("linear", u[0], stamp)
-            self.sup.command("rotary", u[1], stamp)
+        for axis in command or ():
+            self.sup.command(axis, u[0 if axis == "linear" else 1], stamp)
         return self.sup.outputs(stamp + T_NS)
 
     def run(self, n, **kw):
@@ -71,7 +70,7 @@ def test_safety_yaml_is_the_documented_default():
 
 def test_nominal_commands_pass_and_nothing_before_them():
     r = Rig()
-    assert r.tick(command=False) == (5.0, 5.0)
+    assert r.tick(command=()) == (5.0, 5.0)
     st = r.sup.status
     assert st["linear"].state == "SAFE" and st["linear"].causes == ("no_command",)
     assert r.tick() == (7.0, 6.0)
@@ -85,33 +84,68 @@ def test_watchdog_exactly_at_threshold_then_latched_until_acknowledged():
     r = Rig()
     r.tick()
     sup = r.sup
-    stamp = r.k * T_NS
-    sup.command("rotary", 6.0, stamp + 5 * T_NS)  # keep the rotary axis fed
-    assert sup.outputs(stamp + 5 * T_NS) == (7.0, 6.0)  # age == watchdog_ms: still fresh
+    stamp = r.k * T_NS  # the linear axis' last command answers this sample
+    for _ in range(4):  # the linear controller falls silent, the rotary one goes on
+        out = r.tick(command=("rotary",))
+    assert out == (7.0, 6.0)  # outputs at stamp + 5 T: age == watchdog_ms, still fresh
     assert sup.outputs(stamp + 5 * T_NS + 1) == (5.0, 6.0)  # 1 ns older: linear safe
     ev = sup.events()
     assert ("linear", "watchdog") in rules(ev, ERROR)
     assert sup.status["linear"].causes == ("watchdog",)
     # commands resume: still safe until acknowledged
-    sup.command("linear", 8.0, stamp + 6 * T_NS)
-    assert sup.outputs(stamp + 7 * T_NS) == (5.0, 6.0)
+    assert r.tick(u=(8.0, 6.0)) == (5.0, 6.0)
     assert ("linear", "watchdog") in rules(sup.events(), WARN)
     ok, msg = sup.acknowledge("linear")
     assert ok and "watchdog" in msg
-    assert sup.outputs(stamp + 7 * T_NS) == (8.0, 6.0)
+    assert sup.outputs(r.k * T_NS + T_NS) == (8.0, 6.0)
 
 
 def test_watchdog_acknowledged_without_commands_waits_for_them():
     r = Rig()
     r.tick()
     sup = r.sup
-    assert sup.outputs(r.k * T_NS + 20 * T_NS) == (5.0, 5.0)
+    assert r.run(20, command=()) == (5.0, 5.0)
     ok, _ = sup.acknowledge("linear")
     assert ok
     assert sup.status["linear"].causes == ("no_command",)
-    assert sup.outputs(r.k * T_NS + 21 * T_NS)[0] == 5.0
-    sup.command("linear", 3.0, r.k * T_NS + 21 * T_NS)
-    assert sup.outputs(r.k * T_NS + 22 * T_NS)[0] == 3.0
+    assert r.tick(command=())[0] == 5.0
+    assert r.tick(u=(3.0, 6.0), command=("linear",))[0] == 3.0
+
+
+def test_a_command_for_no_sample_taken_or_older_than_the_watchdog_is_refused_and_counted():
+    """Defence in depth against a publisher that is not the controller (or a clock gone
+    wrong): a command stamped after the newest sample, or older than the watchdog, is not
+    taken, keeps no watchdog alive and blocks no later command; counted, warned once."""
+    sup = SafetySupervisor(SafetyParams(), sample_time_s=1e-3)
+    sup.command("linear", 9.0, 0)  # before any sample: it answers nothing
+    assert sup.counters["future_commands"] == 1
+    r = Rig()
+    r.tick()
+    sup = r.sup
+    k = r.k
+    far = (k + 10**9) * T_NS  # 11.6 days ahead: would hold 10 V and starve the watchdog
+    sup.command("linear", 10.0, far)
+    sup.command("linear", 10.0, (k + 1) * T_NS)  # one sample ahead: not taken either
+    assert sup.counters["future_commands"] == 2 and sup.outputs((k + 1) * T_NS) == (7.0, 6.0)
+    ev = [e for e in sup.events() if e.level == WARN]
+    assert rules(ev) == [("linear", "command_stamp")]  # once per axis and kind
+    assert "stamped after the newest sample" in ev[0].message
+    # the controller's next command is taken (the rogue stamp did not become the newest)
+    assert r.tick(u=(4.0, 6.0)) == (4.0, 6.0)
+    # a replay: the command answering a sample older than the watchdog (5 ms)
+    r.run(5)
+    old = (r.k - 6) * T_NS
+    sup.command("rotary", 9.0, old)
+    assert sup.counters["expired_commands"] == 1
+    assert sup.outputs(r.k * T_NS + T_NS) == (7.0, 6.0)
+    assert rules(sup.events(), WARN) == [("rotary", "command_stamp")]
+    # the rogue commands keep nothing alive: silent controllers still trip the watchdog
+    for j in range(8):
+        sup.command("linear", 10.0, (r.k + 1 + j) * T_NS + 10**12)
+        out = r.tick(command=())
+    assert out == (5.0, 5.0)
+    assert sup.status["linear"].causes == ("watchdog",)
+    assert sup.counters["future_commands"] == 10
 
 
 def test_soft_limit_at_rest_exactly_at_the_margin():

@@ -153,7 +153,7 @@ def sup_check_sample(sp, si, sf, sn, xw_t, xw_x, cw_t, cw_c, now, p1, p2, pm, x,
 def sup_command(sf, sn, axis, u, stamp):
     """``command(axis, u, stamp_ns)``: a refusal latches the axis; every outcome but "taken"
     is an event or a count."""
-    done = rules.command(sf[0], axis, u, stamp)
+    done = rules.command(sf[0], sf[0], axis, u, stamp)
     if done:
         sn[SN_EVENT] = 1
     if done & rules.CMD_REFUSED:

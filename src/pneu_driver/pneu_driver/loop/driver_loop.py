@@ -58,13 +58,23 @@ log = logging.getLogger("pneu_driver.loop.driver_loop")
 class CommandSlot:
     """The newest command per axis, set from any thread, taken by the loop thread.
 
-    A command with an older stamp than one already seen for its axis is dropped.
+    A command with an older stamp than one already seen for its axis is dropped, and so
+    is one stamped after the newest sample taken (:meth:`taken`): it answers no sample,
+    and were it kept, its stamp would make every true answer look older (counted in
+    ``future``, per axis).
     """
 
     def __init__(self, axes: Iterable[str] = AXES):
         self._cond = threading.Condition(threading.Lock())
         self._newest = dict.fromkeys(axes, -(1 << 62))
         self._pending: dict[str, tuple[float, int]] = {}
+        self._sample_ns = -(1 << 62)  # no sample taken yet: every command is early
+        self.future = dict.fromkeys(axes, 0)
+
+    def taken(self, stamp_ns: int) -> None:
+        """Sample ``stamp_ns`` was taken: commands may answer it (loop thread)."""
+        with self._cond:
+            self._sample_ns = stamp_ns
 
     def put(self, axis: str, u: float, stamp_ns: int) -> bool:
         """Store ``u`` [V] for ``axis`` (answering the sample stamped ``stamp_ns``); False if older."""
@@ -73,6 +83,9 @@ class CommandSlot:
                 raise ValueError(
                     f"axis: {axis!r} refused; allowed: one of {', '.join(self._newest)}"
                 )
+            if stamp_ns > self._sample_ns:
+                self.future[axis] += 1
+                return False
             if stamp_ns < self._newest[axis]:
                 return False
             self._newest[axis] = stamp_ns
@@ -214,12 +227,21 @@ class DriverLoop:
         with self._lock:
             return self._sup.status
 
+    def command_counts(self) -> dict[str, str]:
+        """Commands not taken: the supervisor's counters and those stamped for no sample."""
+        with self._lock:
+            out = {k: str(v) for k, v in self._sup.counters.items()}
+        for axis, n in self.commands.future.items():
+            out[f"{axis}.future_commands"] = str(n)
+        return out
+
     def diagnostics(self) -> dict[str, str]:
         """Key-values for the driver's periodic ``/diagnostics`` status (loop timing and axis states)."""
         out = {
             k: f"{v:.6g}" if isinstance(v, float) else str(v)
             for k, v in self.stats.as_dict().items()
         }
+        out.update(self.command_counts())
         out["pacing"] = "hardware" if self.hardware_paced else "software"
         out["realtime"] = "; ".join(self.realtime_notes) or "normal scheduling"
         for axis, st in self.status().items():
@@ -374,6 +396,7 @@ class DriverLoop:
         sup = self._sup
         with self._lock:
             sup.check_sample(sample, raw.volts)
+        self.commands.taken(stamp)
         if self._on_sample is not None:
             self._on_sample(sample)
         if self.expected_axes:

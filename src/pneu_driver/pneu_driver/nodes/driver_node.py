@@ -276,6 +276,7 @@ class DriverNode(ShellDefaults, Node):
             # percentiles over the last second: cheap on the executor thread taking the commands
             for k, v in self.loop.stats.as_dict(last=round(self.loop.rig.loop.rate_hz)).items()
         }
+        stats.update(self.loop.command_counts())
         err = self.loop.error
         running = self.thread is not None and self.thread.is_alive()
         level = 2 if err is not None or not running else (1 if self.loop.stats.late_cycles else 0)

@@ -112,6 +112,8 @@ CMD_REFUSED = 1  # outside [U_MIN_V, U_MAX_V] or NaN: not taken, output_sanity p
 CMD_REFUSAL_GONE = 2  # a good command after a refused one: output_sanity gone
 CMD_STALE = 4  # older than the last accepted one: ignored
 CMD_FIRST = 8  # the axis's first accepted command (or the first after an acknowledge)
+CMD_FUTURE = 16  # stamped for a sample not yet taken (or before any sample): not taken
+CMD_EXPIRED = 32  # answering a sample older than the watchdog: not taken
 
 # ------------------------------------------------------------------ records
 THRESHOLDS = RecordType(
@@ -157,6 +159,7 @@ STATE = RecordType(
     "SafetyRuleState",
     [
         ("have_sample", "i"),
+        ("sample_t", "i"),  # stamp of the newest sample checked [ns]
         ("x", "f"),  # last finite position (NaN after a non-finite one) [m]
         ("v", "f", 0.0),  # piston velocity over the window [m/s]
         ("xw_t", ("i", _W)),  # velocity window ring: stamps, positions
@@ -499,6 +502,7 @@ def sample_faults(th, s, d, now, p_c1, p_c2, p_m1, x, c, values, have_volts):
     keys |= angle_faults(th, c)
     keys |= stall_fault(th, s, d, now, p_m1)
     s.have_sample = 1
+    s.sample_t = now
     return keys
 
 
@@ -510,9 +514,16 @@ def sensor_key_axes(keys):
 
 # ------------------------------------------------------------------ commands and outputs
 @kernel
-def command(s, axis, u, stamp):
+def command(th, s, axis, u, stamp):
     """Axis ``axis``'s command ``u`` [V] answering the sample stamped ``stamp``: what it did
-    (``CMD_*`` bits; 0: taken, nothing to report)."""
+    (``CMD_*`` bits; 0: taken, nothing to report). A command answers a sample that was
+    taken: one stamped after the newest sample (a clock gone wrong, or a publisher that is
+    not a controller) or older than the watchdog (a replay) is not taken and keeps no
+    watchdog alive (design §3)."""
+    if not s.have_sample or stamp > s.sample_t:
+        return CMD_FUTURE
+    if s.sample_t - stamp > th.watchdog_ns:
+        return CMD_EXPIRED
     bit = 1 << axis
     if not (U_MIN_V <= u <= U_MAX_V):  # NaN fails every comparison; ±inf is out of range
         s.refused |= bit

@@ -113,10 +113,13 @@ class SafetySupervisor:
         self._latched: dict[str, dict[str, str]] = {a: {} for a in AXES}
         self._estop: str | None = None
         self._now_ns = 0
+        self._stamp_warned: set[tuple[str, str]] = set()
         self._events: deque[SafetyEvent] = deque(maxlen=10000)
         self.counters = {
             "refused_commands": 0,
             "stale_commands": 0,
+            "future_commands": 0,
+            "expired_commands": 0,
             "trips": 0,
             "events_dropped": 0,
         }
@@ -309,11 +312,31 @@ class SafetySupervisor:
 
         NaN/inf or outside [0, 10] V: refused (never written), the axis goes safe
         (latched ``output_sanity``). An older stamp than the last accepted one is ignored.
+        Stamped for a sample not yet taken, or older than the watchdog: not taken, counted
+        (``future_commands``, ``expired_commands``), a warning the first time per axis.
         """
         a = _AXIS_INDEX.get(axis)
         if a is None:
             raise ValueError(f"axis: {axis!r} refused; allowed: one of {', '.join(AXES)}")
-        done = rules.command(self._s, a, float(u), int(stamp_ns))
+        done = rules.command(self._th, self._s, a, float(u), int(stamp_ns))
+        if done & (rules.CMD_FUTURE | rules.CMD_EXPIRED):
+            kind = "future" if done & rules.CMD_FUTURE else "expired"
+            self.counters[f"{kind}_commands"] += 1
+            if (axis, kind) not in self._stamp_warned:
+                self._stamp_warned.add((axis, kind))
+                why = (
+                    "stamped after the newest sample"
+                    if kind == "future"
+                    else f"older than watchdog_ms = {self.params.watchdog_ms:g}"
+                )
+                self._emit(
+                    axis,
+                    "command_stamp",
+                    WARN,
+                    f"{axis} command refused: {why} (sample {self._s.sample_t} ns, command {int(stamp_ns)} ns); counted in {kind}_commands",
+                    {"stamp_ns": int(stamp_ns), "sample_ns": self._s.sample_t},
+                )
+            return
         group = _SANITY_GROUP[axis]
         if done & rules.CMD_REFUSED:
             self.counters["refused_commands"] += 1
