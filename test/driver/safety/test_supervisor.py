@@ -586,3 +586,36 @@ def test_new_safety_fields_refused_with_one_line_naming_them():
             from_dict(SafetyParams, values, strict=False)
     p = from_dict(SafetyParams, {"angle_margin_deg": -1.0, "allow_unsafe": True}, strict=False)
     assert p.unsafe_overrides() == ("angle_margin_deg=-1 ° < 0: angle soft limit beyond the range",)
+
+
+def test_a_second_publisher_on_a_command_topic_is_reported_or_trips_the_axis():
+    """The graph's publisher count per command topic (what the driver and sim nodes read
+    once a second): more than one is a warning; with publisher_trip the axis goes safe
+    until the count is one again and the axis is acknowledged. The other axis goes on."""
+    r = Rig()
+    r.run(3)
+    r.sup.events()
+    r.sup.command_publishers({"linear": 2, "rotary": 1})
+    assert rules(r.sup.events(), WARN) == [("linear", "publishers")]
+    assert r.tick() == (7.0, 6.0)  # reported only
+    r.sup.command_publishers({"linear": 2, "rotary": 1})
+    assert r.sup.events() == []  # no repeat while it lasts
+    r.sup.command_publishers({"linear": 1, "rotary": 1})
+    assert rules(r.sup.events(), OK) == [("linear", "publishers")]
+
+    r = Rig(dataclasses.replace(SafetyParams(), publisher_trip=True))
+    r.run(3)
+    r.sup.events()
+    r.sup.command_publishers({"linear": 1, "rotary": 3})
+    ev = r.sup.events()
+    assert rules(ev, ERROR) == [("rotary", "publishers")]
+    assert "3 publishers on the rotary valve command topic" in ev[0].message
+    assert r.tick() == (7.0, 5.0)  # the rotary valve safe, the linear axis goes on
+    assert r.sup.acknowledge("rotary")[0] is False  # still three
+    r.sup.command_publishers({"linear": 1, "rotary": 1})
+    assert r.tick() == (7.0, 5.0)  # latched until acknowledged
+    assert r.sup.acknowledge("rotary")[0] is True
+    assert r.tick() == (7.0, 6.0)
+    assert r.sup.publishers == {"linear": 1, "rotary": 1}
+    with pytest.raises(ValueError, match="axis: 'z'"):
+        r.sup.command_publishers({"z": 2})

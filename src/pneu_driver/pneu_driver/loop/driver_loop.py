@@ -227,6 +227,14 @@ class DriverLoop:
         with self._lock:
             return self._sup.status
 
+    def command_publishers(self, counts: dict[str, int]) -> None:
+        """The graph's publisher count per command topic (see ``SafetySupervisor.command_publishers``)."""
+        with self._lock:
+            self._sup.command_publishers(counts)
+            events = self._sup.events()
+        if events and self._on_events is not None:
+            self._on_events(events)
+
     def command_counts(self) -> dict[str, str]:
         """Commands not taken: the supervisor's counters and those stamped for no sample."""
         with self._lock:

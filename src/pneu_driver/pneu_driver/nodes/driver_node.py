@@ -91,8 +91,9 @@ class DriverNode(ShellDefaults, Node):
             expected_axes=choices[axes],
             epoch_ns=self.get_clock().now().nanoseconds + rig.period_ns,  # stamps on the ROS clock
         )
+        self.cmd_subs = {}
         for a in () if hosted else AXES:
-            self.create_subscription(
+            self.cmd_subs[a] = self.create_subscription(
                 JointState,
                 VALVE_COMMAND_TOPIC[a],
                 lambda data, a=a: self._on_command(data, a),  # raw bytes, one argument
@@ -276,6 +277,10 @@ class DriverNode(ShellDefaults, Node):
             # percentiles over the last second: cheap on the executor thread taking the commands
             for k, v in self.loop.stats.as_dict(last=round(self.loop.rig.loop.rate_hz)).items()
         }
+        counts = {a: sub.get_publisher_count() for a, sub in self.cmd_subs.items()}
+        if counts:  # a second publisher is reported and, with publisher_trip, trips the axis
+            self.loop.command_publishers(counts)
+        stats.update({f"{a}.publishers": str(n) for a, n in counts.items()})
         stats.update(self.loop.command_counts())
         err = self.loop.error
         running = self.thread is not None and self.thread.is_alive()

@@ -34,6 +34,12 @@ class SafetyParams:
         hi=60000.0,
         desc="no fresh command for this long → that valve safe (latched)",
     )
+    publisher_trip: bool = param(
+        False,
+        desc="more than one publisher on an axis' valve command topic (the count the ROS graph "
+        "shows the driver or sim node, once a second) trips that axis safe (latched); off: "
+        "reported in /diagnostics only",
+    )
     # stroke soft limits (linear axis)
     stroke_m: float = param(
         0.150,

@@ -114,6 +114,7 @@ class SafetySupervisor:
         self._estop: str | None = None
         self._now_ns = 0
         self._stamp_warned: set[tuple[str, str]] = set()
+        self._publishers: dict[str, int] = {}
         self._events: deque[SafetyEvent] = deque(maxlen=10000)
         self.counters = {
             "refused_commands": 0,
@@ -442,6 +443,45 @@ class SafetySupervisor:
                 self._emit(
                     "linear", "soft_limit", OK, f"soft limit released at x = {x:.4g} m", values, now
                 )
+
+    # ------------------------------------------------------------------- graph
+    def command_publishers(self, counts: dict[str, int]) -> None:
+        """The publishers the ROS graph shows on each axis' valve command topic.
+
+        One is the controller; more is a second controller or somebody else's process (a
+        command topic is not access-controlled without SROS2): a warning when it starts and
+        an OK when it ends, and with ``publisher_trip`` the axis safe (latched,
+        ``publishers``) until the count is back to one and the axis acknowledged.
+        """
+        present = {}
+        for axis, n in counts.items():
+            if axis not in self._latched:
+                raise ValueError(f"axis: {axis!r} refused; allowed: one of {', '.join(AXES)}")
+            n = int(n)
+            was = self._publishers.get(axis, 0)
+            self._publishers[axis] = n
+            msg = f"{n} publishers on the {axis} valve command topic (one expected: its controller)"
+            if n > 1:
+                present[(axis, "publishers")] = (msg, {"publishers": n})
+            if (n > 1) == (was > 1):
+                continue
+            if n > 1 and not self.params.publisher_trip:
+                self._emit(axis, "publishers", WARN, msg, {"publishers": n})
+            elif n <= 1:
+                self._emit(
+                    axis,
+                    "publishers",
+                    OK,
+                    f"{n} publisher(s) on the {axis} valve command topic",
+                    {"publishers": n},
+                )
+        if self.params.publisher_trip:
+            self._update_group("publishers", present, self._now_ns)
+
+    @property
+    def publishers(self) -> dict[str, int]:
+        """The last publisher counts given to :meth:`command_publishers`, per axis."""
+        return dict(self._publishers)
 
     # ------------------------------------------------------------ operator side
     def estop(self, reason: str) -> None:

@@ -161,6 +161,7 @@ class SimNode(ShellDefaults, Node):
 
         mode = self.p.mode
         cmd_qos = to_rclpy(sub_qos_for(VALVE_COMMAND_TOPIC["linear"], mode), rq)
+        self.cmd_axes = () if hosted else tuple(self.axes)
         self.cmd_subs = [
             self.create_subscription(
                 JointState,
@@ -369,6 +370,18 @@ class SimNode(ShellDefaults, Node):
                 self._advance()
         return response
 
+    def _watch_publishers(self) -> dict[str, str]:
+        """The publishers the graph shows on each command topic, to the supervisor (a second one
+        is reported and, with ``publisher_trip``, trips that axis)."""
+        counts = {a: sub.get_publisher_count() for a, sub in zip(self.cmd_axes, self.cmd_subs)}
+        if self.supervisor is not None and counts:
+            with self._locked():
+                self.supervisor.command_publishers(counts)
+            if self.loop is None:  # lockstep: the node drains the supervisor's events
+                stamp = self.core.sample.stamp_ns if self.core.sample is not None else 0
+                self._publish_safety_events(self._drain(), stamp)
+        return {f"{a}.publishers": str(n) for a, n in counts.items()}
+
     def _publish_safety_events(self, events, stamp_ns: int) -> None:
         """Supervisor transitions on ``/diagnostics``, stamped with their sample."""
         if events:
@@ -396,6 +409,8 @@ class SimNode(ShellDefaults, Node):
         values.update(
             mode=self.p.mode, sim_time_s=f"{sim_s:.3f}", real_time_factor=f"{sim_s / elapsed:.3g}"
         )
+        if periodic:
+            values.update(self._watch_publishers())
         msg = (
             "halted: " + self.halted
             if self.halted
