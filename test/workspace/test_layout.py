@@ -44,6 +44,7 @@ ROS_DEPS = {
         "rcl_interfaces",
         "builtin_interfaces",
         "launch",
+        "sros2",
         "launch_ros",
         "ament_index_python",
     )
@@ -365,6 +366,7 @@ def _fake_launch_modules() -> dict[str, types.ModuleType]:
         OpaqueFunction=type("OpaqueFunction", (_Action,), {}),
         Shutdown=type("Shutdown", (_Action,), {}),
         ExecuteProcess=type("ExecuteProcess", (_Action,), {}),
+        SetEnvironmentVariable=type("SetEnvironmentVariable", (_Action,), {}),
     )
     mod("launch.substitutions", LaunchConfiguration=_Config)
     mod("launch_ros")
@@ -638,3 +640,43 @@ def test_param_types_helper_sees_dataclass_fields():
     assert dataclasses.is_dataclass(
         __import__("pneu_sim.nodes.sim_core").nodes.sim_core.SimNodeParams
     )
+
+
+def _env_actions(entities) -> dict[str, str]:
+    return {e.args[0]: e.args[1] for e in entities if type(e).__name__ == "SetEnvironmentVariable"}
+
+
+def test_launches_are_secured_by_a_keystore_or_say_so(tmp_path, monkeypatch, capsys):
+    """keystore:= enables enforced SROS2 for every process; unsecured, the twin discovers on
+    localhost only and the rig warns in one line; a keystore without the graph's enclaves
+    is refused before anything starts."""
+    from pneu_msgs_py.contract.security import ROLES, enclave
+
+    sim = SRC / "pneu_sim" / "launch" / "sim.launch.py"
+    rig = SRC / "pneu_driver" / "launch" / "rig.launch.py"
+    for var in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_SECURITY_ENABLE"):
+        monkeypatch.delenv(var, raising=False)
+    env = _env_actions(_run_launch(sim, {"out": str(tmp_path / "a")}))
+    assert env == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    capsys.readouterr()
+    assert _env_actions(_run_launch(rig, {"out": str(tmp_path / "b")})) == {}
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unsecured" in err[0] and "keystore:=" in err[0]
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    _run_launch(rig, {"out": str(tmp_path / "c")})
+    assert capsys.readouterr().err == ""  # localhost-only: nothing to warn of
+    keys = tmp_path / "keys"
+    with pytest.raises(RuntimeError, match="keystore: .* refused; allowed: a keystore made by"):
+        _run_launch(rig, {"out": str(tmp_path / "d"), "keystore": str(keys)})
+    for r in ROLES:
+        d = keys / "enclaves" / enclave(r).lstrip("/")
+        d.mkdir(parents=True)
+        (d / "permissions.p7s").write_text("signed")
+    entities = _run_launch(rig, {"out": str(tmp_path / "e"), "keystore": str(keys)})
+    assert _env_actions(entities) == {
+        "ROS_SECURITY_KEYSTORE": str(keys),
+        "ROS_SECURITY_ENABLE": "true",
+        "ROS_SECURITY_STRATEGY": "Enforce",
+    }
+    for path in LAUNCH_FILES:
+        assert "keystore" in _launch_args(path), path.name

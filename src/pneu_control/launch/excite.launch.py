@@ -94,4 +94,4 @@ def _driver(arg: dict[str, str], config: str, mode: str, duration: float):
 
 
 def generate_launch_description():
-    return launch_description(ARGS, _setup)
+    return launch_description(ARGS, _setup, target=lambda v: v["target"])

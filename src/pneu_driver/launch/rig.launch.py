@@ -64,4 +64,4 @@ def _setup(arg: dict[str, str]) -> list:
 
 
 def generate_launch_description():
-    return launch_description(ARGS, _setup)
+    return launch_description(ARGS, _setup, target="rig")

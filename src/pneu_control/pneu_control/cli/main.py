@@ -41,6 +41,7 @@ SUBCOMMANDS: tuple[tuple[str, str], ...] = (
     ("identify", "pneu_control.cli.identify"),
     ("validate", "pneu_control.cli.validate"),
     ("bench", "pneu_control.cli.bench"),
+    ("security", "pneu_control.cli.security"),
 )
 
 

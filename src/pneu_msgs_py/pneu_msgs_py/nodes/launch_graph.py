@@ -38,6 +38,7 @@ __all__ = [
     "launch_arguments",
     "io_node",
     "launch_description",
+    "security_actions",
     "logger_node",
     "reference_overrides",
 ]
@@ -299,25 +300,90 @@ def rosbag2_recorder(out: str, mode: str) -> Any:
     cmd = ["ros2", "bag", "record", "-s", "mcap", "-o", os.path.join(out, "bag")]
     cmd += ["--qos-profile-overrides-path", qos_file, "--max-cache-size", str(64 << 20)]
     cmd += ["--disable-keyboard-controls", "--topics", *(t.name for t in TOPICS)]
+    from pneu_msgs_py.contract.security import enclave
+
     return ExecuteProcess(
         cmd=cmd,
         name="recorder",
+        # with security on, ros2 bag record starts in the recorder's enclave
+        additional_env={"ROS_SECURITY_ENCLAVE_OVERRIDE": enclave("recorder")},
         output="screen",
         sigterm_timeout="20",  # flush the cache and write the summary before any SIGKILL
         sigkill_timeout="10",
     )
 
 
+KEYSTORE_ARG = (
+    "keystore",
+    "",
+    "SROS2 keystore made by `pneu security` ('' = unsecured): every process in its role's "
+    "enclave, ROS_SECURITY_STRATEGY=Enforce (a process without valid credentials is refused)",
+    None,
+)
+
+
+def security_actions(keystore: str, target: str) -> list[Any]:
+    """The environment of every process of the launch: secured by ``keystore`` (enforced), or
+    unsecured -- then the twin (``target`` sim) discovers on localhost only unless the user
+    chose a range, and the rig says in one line that anyone on the network may command it."""
+    import os
+    import sys
+
+    from launch.actions import SetEnvironmentVariable
+
+    from pneu_msgs_py.contract.security import ROLES, enclave
+
+    if keystore:
+        missing = [
+            enclave(r)
+            for r in ROLES
+            if not os.path.isfile(
+                os.path.join(keystore, "enclaves", enclave(r).lstrip("/"), "permissions.p7s")
+            )
+        ]
+        if missing:
+            raise RuntimeError(
+                f"keystore: {keystore} refused; allowed: a keystore made by `pneu security` "
+                f"(missing enclaves: {', '.join(missing)})"
+            )
+        return [
+            SetEnvironmentVariable("ROS_SECURITY_KEYSTORE", os.path.abspath(keystore)),
+            SetEnvironmentVariable("ROS_SECURITY_ENABLE", "true"),
+            SetEnvironmentVariable("ROS_SECURITY_STRATEGY", "Enforce"),
+        ]
+    secured = os.environ.get("ROS_SECURITY_ENABLE", "").lower() == "true"
+    rng = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "")
+    if target == "sim" and not rng:
+        return [SetEnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")]
+    if target == "rig" and not secured and rng != "LOCALHOST":
+        print(
+            "[WARN] rig graph unsecured and discoverable beyond this host "
+            f"(ROS_AUTOMATIC_DISCOVERY_RANGE={rng or 'SUBNET (default)'}): any process on "
+            "the network can command the valves; use keystore:= (pneu security) or "
+            "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST",
+            file=sys.stderr,
+        )
+    return []
+
+
 def launch_description(
-    args: list[tuple[str, str, str, list | None]], setup: Callable[[dict[str, str]], list[Any]]
+    args: list[tuple[str, str, str, list | None]],
+    setup: Callable[[dict[str, str]], list[Any]],
+    target: str | Callable[[dict[str, str]], str] = "sim",
 ) -> Any:
-    """A LaunchDescription declaring ``args``; ``setup(values)`` returns the actions to start."""
+    """A LaunchDescription declaring ``args`` and ``keystore``; ``setup(values)`` returns the
+    actions to start, after :func:`security_actions` for the ``target`` (sim or rig, or a
+    function of the values)."""
     from launch import LaunchDescription
     from launch.actions import DeclareLaunchArgument, OpaqueFunction
     from launch.substitutions import LaunchConfiguration
 
+    args = [*args, KEYSTORE_ARG]
+
     def _setup(context):
-        return setup({name: LaunchConfiguration(name).perform(context) for name, *_ in args})
+        values = {name: LaunchConfiguration(name).perform(context) for name, *_ in args}
+        io = target(values) if callable(target) else target
+        return [*security_actions(values["keystore"], io), *setup(values)]
 
     return LaunchDescription(
         [

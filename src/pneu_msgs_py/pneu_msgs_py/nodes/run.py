@@ -144,6 +144,16 @@ def node_entry(module: str, func: str = "main") -> Callable[..., int]:
     return main
 
 
+def _before_init(name: str, args: list[str] | None) -> None:
+    """The process's enclave with security on (design §13); the sim on localhost-only
+    discovery unless the user chose a range (a twin has no business on the lab network)."""
+    from pneu_msgs_py.contract.security import select_enclave
+
+    select_enclave(name, os.environ, list(sys.argv if args is None else args))
+    if name == "sim_node":
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+
 def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | None = None) -> int:
     """Run one node to the end (see the module docstring); returns the exit status."""
     import rclpy
@@ -157,6 +167,7 @@ def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | No
     node = executor = None
     code = 0
     try:
+        _before_init(name, args)
         rclpy.init(args=args)
         made = make_node()
         nodes = list(made) if isinstance(made, Sequence) else [made]

@@ -1,0 +1,44 @@
+"""The graph's SROS2 keystore: one enclave per role, permissions from the topic table (sros2 shell).
+
+``pneu security KEYSTORE [--operator NAME ...]`` calls :func:`create`: the keystore
+(its identity and permissions CAs, the governance: authentication, access control
+and encryption on), one enclave per role of
+:data:`pneu_msgs_py.contract.security.ROLES` and per operator, each enclave's
+permissions signed from :func:`~pneu_msgs_py.contract.security.policy_xml` (kept in
+``KEYSTORE/pneu_policy.xml``). Permissions are bound to the domain in
+``ROS_DOMAIN_ID`` (as ``ros2 security`` binds them). Design §13.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+
+from sros2.keystore import create_enclave, create_keystore, create_permission, is_valid_keystore
+
+from pneu_msgs_py.contract.security import ROLES, enclave, operator_enclave, policy_xml
+
+__all__ = ["create", "POLICY_NAME"]
+
+POLICY_NAME = "pneu_policy.xml"
+
+
+def create(keystore: pathlib.Path, operators: tuple[str, ...] = ()) -> list[str]:
+    """Create (or complete) ``keystore`` for the graph and ``operators``; the enclaves made.
+
+    An existing keystore keeps its CAs and enclaves' keys (so running nodes keep
+    working); every enclave's permissions are signed again from today's policy.
+    """
+    keystore = pathlib.Path(keystore)
+    paths = [enclave(r) for r in ROLES] + [operator_enclave(n) for n in operators]
+    text = policy_xml(tuple(operators))
+    if not is_valid_keystore(keystore):
+        create_keystore(keystore)
+    policy = keystore / POLICY_NAME
+    tmp = keystore / (POLICY_NAME + ".partial")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, policy)
+    for path in paths:
+        create_enclave(keystore, path)  # a wildcard permission sros2 writes first ...
+        create_permission(keystore, path, policy)  # ... replaced by the policy's
+    return paths
