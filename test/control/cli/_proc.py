@@ -11,6 +11,7 @@ from pathlib import Path
 
 PNEU = [sys.executable, "-m", "pneu_control.cli.main"]
 DOCUMENTED = {0, 1, 2, 3, 129, 130, 143}
+_PNEU_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # lifecycle.signals.SIGNALS
 
 
 def start(*argv: str, new_session: bool = False) -> subprocess.Popen:
@@ -27,11 +28,14 @@ def start(*argv: str, new_session: bool = False) -> subprocess.Popen:
 
 
 def handlers_installed(pid: int) -> bool:
-    """Has the process installed pneu's handlers (SIGTERM caught: Python alone never catches it)?"""
+    """Has the process installed pneu's handlers? All of SIGINT, SIGTERM and SIGHUP caught
+    (Python alone catches SIGINT only; pneu installs the three one after the other, so a
+    process seen between two of them would still die of the third's default action)."""
     try:
         for line in Path(f"/proc/{pid}/status").read_text().splitlines():
             if line.startswith("SigCgt:"):
-                return bool(int(line.split()[1], 16) >> (signal.SIGTERM - 1) & 1)
+                caught = int(line.split()[1], 16)
+                return all(caught >> (s - 1) & 1 for s in _PNEU_SIGNALS)
     except OSError:
         pass
     return False

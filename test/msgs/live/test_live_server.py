@@ -85,9 +85,8 @@ def _subscribe_all(srv: LiveServer) -> fox.FoxgloveClient:
     client = fox.FoxgloveClient(srv.url)
     client.wait_for_channels(srv.topics)
     client.subscribe(srv.topics)
-    for _ in range(500):  # the server applies the subscription asynchronously
-        if set(srv.subscribed()) == set(srv.topics):
-            break
+    end = time.monotonic() + 120  # the server applies the subscription asynchronously
+    while set(srv.subscribed()) != set(srv.topics) and time.monotonic() < end:
         time.sleep(0.01)
     assert set(srv.subscribed()) == set(srv.topics)
     return client
