@@ -134,14 +134,32 @@ def _sim_counters(data) -> dict[str, str]:
     return last
 
 
-def measure(duration_s: float, deployment: str, executor: str, out: Path) -> dict:
-    """Launch, sample CPU, read the bag; returns the figures (see the module docstring)."""
+_BUSY = "while True: pass"
+
+
+def _start_load(n: int) -> list[subprocess.Popen]:
+    """``n`` busy processes at normal priority (one core's worth each), beside the graph."""
+    return [subprocess.Popen([sys.executable, "-c", _BUSY]) for _ in range(n)]
+
+
+def measure(
+    duration_s: float,
+    deployment: str,
+    executor: str,
+    out: Path,
+    keystore: str = "",
+    load: int = 0,
+) -> dict:
+    """Launch (secured by ``keystore``, beside ``load`` busy processes), sample CPU, read the
+    bag; returns the figures (see the module docstring)."""
     from pneu_msgs_py.bag.reader import read_run
 
     cmd = ["ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py", "mode:=realtime"]
     cmd += ["axes:=both", f"duration:={duration_s:g}", f"deployment:={deployment}"]
     cmd += [f"out:={out}"] + ([f"executor:={executor}"] if executor else [])
+    cmd += [f"keystore:={keystore}"] if keystore else []
     log = open(out.parent / f"{out.name}.log", "w")
+    busy = _start_load(load)
     proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     try:
         # the steady part: from when the sim is publishing until just before the end
@@ -165,6 +183,9 @@ def measure(duration_s: float, deployment: str, executor: str, out: Path) -> dic
         raise
     finally:
         log.close()
+        for b in busy:
+            b.kill()
+            b.wait()
     data = read_run(out / "bag")
     sim = _sim_counters(data)
     res: dict = {
@@ -175,6 +196,8 @@ def measure(duration_s: float, deployment: str, executor: str, out: Path) -> dic
         "skipped_ticks": int(sim.get("skipped_ticks", "0")),
         "recorded_samples": len(data["/pneu/linear/joint_state"]),
         "load_average": os.getloadavg()[0],
+        "busy_processes": load,
+        "secured": bool(keystore),
     }
     for axis in ("linear", "rotary"):
         missed = int(sim.get(f"missed.{axis}", "0"))
@@ -204,15 +227,27 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--executor", choices=("", "events", "single", "auto"), default="")
     p.add_argument("--out", help="directory for the bag and the launch log (default: a temp dir)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--keystore", default="", help="run the graph secured (SROS2, a `pneu security` keystore)"
+    )
+    p.add_argument(
+        "--load",
+        type=int,
+        default=0,
+        help="busy processes at normal priority beside the graph (0..16)",
+    )
     args = p.parse_args(argv)
+    if not 0 <= args.load <= 16:
+        p.error(f"--load: {args.load} refused; allowed: 0..16 busy processes")
     if not 10.0 <= args.duration <= 3600.0:
         p.error(f"--duration: {args.duration:g} refused; allowed: [10, 3600] s")
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="pneu_bench_ros_"))
     base.mkdir(parents=True, exist_ok=True)
-    out = base / f"{args.deployment}_{args.executor or 'default'}"
+    tag = ("_secured" if args.keystore else "") + (f"_load{args.load}" if args.load else "")
+    out = base / f"{args.deployment}_{args.executor or 'default'}{tag}"
     if out.exists():
         p.error(f"--out: {out} exists; allowed: a directory without a previous bench run")
-    res = measure(args.duration, args.deployment, args.executor, out)
+    res = measure(args.duration, args.deployment, args.executor, out, args.keystore, args.load)
     if args.json:
         print(json.dumps(res, indent=1))
     else:
