@@ -183,7 +183,7 @@ def test_another_enclaves_credentials_cannot_publish_a_valve_command(tmp_path, k
 
 def test_unsecured_the_same_rogue_moves_the_valve(tmp_path):
     """The control: without a keystore the rogue's commands reach the sim."""
-    proc, line, out = _run_with_rogue(tmp_path, None)
+    _proc, line, out = _run_with_rogue(tmp_path, None)
     assert "publisher created" in line
     x = _bag_x(out) if (out / "run.mcap").exists() else np.array([])
     assert len(x) != 2000 or not np.array_equal(x, _runner_x())
