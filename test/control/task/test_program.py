@@ -117,7 +117,24 @@ def test_conditions_are_parsed_in_si():
             [{"rotate": {"turns": 3.0, "speed_rpm": 60.0}}],
             {"plumbing": "bidirectional", "limits": {"angle_max_deg": 720.0}},
             "segments[0].rotate",
-            "inside limits",
+            "inside the soft limits [-inf, 690]°",
+        ),
+        (
+            [
+                {"rotate": {"by_deg": 700.0, "speed_rpm": 60.0}}
+            ],  # inside the range, not the soft limits
+            {
+                "plumbing": "bidirectional",
+                "limits": {"angle_min_deg": -720.0, "angle_max_deg": 720.0},
+            },
+            "segments[0].rotate",
+            "inside the soft limits [-690, 690]°",
+        ),
+        (
+            [{"dwell": {"duration_s": 1.0}}],
+            {"limits": {"angle_min_deg": -20.0, "angle_max_deg": 20.0}},
+            "limits",
+            "wider than 2 × angle_margin_deg (60°",
         ),
         ([{"screw": {"pitch_mm": 1.0, "turns": 2.0}}], {}, "segments[0].screw", "rate_turns_s"),
         ([], {}, "segments", "non-empty"),
@@ -143,3 +160,29 @@ def test_bidirectional_plumbing_turns_both_ways():
         _task({"rotate": {"by_deg": -90.0, "speed_rpm": 60.0}}, plumbing="bidirectional")
     )
     assert p.segments[0].theta_end == pytest.approx(-math.pi / 2)
+
+
+def test_the_tools_range_is_the_tasks_limits_within_the_supervisors():
+    import dataclasses
+
+    sp = dataclasses.replace(
+        SafetyParams(), angle_limits=True, angle_min_deg=-400.0, angle_max_deg=400.0
+    )
+    p = parse_task(
+        _task(
+            {"dwell": {"duration_s": 1.0}},
+            limits={"angle_min_deg": -1000.0, "angle_max_deg": 200.0},
+        ),
+        safety=sp,
+    )
+    assert p.angle_limits_deg == (-400.0, 200.0)
+    # the supervisor's own range applies to a task without limits as well
+    with pytest.raises(ParamError, match=r"inside the soft limits \[-370, 370\]"):
+        parse_task(
+            _task({"rotate": {"by_deg": 380.0, "speed_rpm": 60.0}}, plumbing="bidirectional"),
+            safety=sp,
+        )
+    assert (
+        parse_task(_task({"dwell": {"duration_s": 1.0}}), safety=SafetyParams()).angle_limits_deg
+        is None
+    )

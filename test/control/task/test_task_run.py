@@ -66,3 +66,23 @@ def test_bad_programs_write_nothing(tmp_path, capsys, body, field):
         from pneu_control.task.session import prepare
 
         prepare(f)
+
+
+def test_a_tasks_limits_are_the_supervisors_angle_limits_during_the_run(tmp_path):
+    """The tool's range a task names is enforced by the supervisor while it runs (not only
+    checked before): its soft limits angle_margin_deg inside, and a move inside them runs
+    without a hold or a trip."""
+    from pneu_control.task.session import execute_task, prepare
+
+    f = tmp_path / "tool.yaml"
+    f.write_text(
+        "plumbing: bidirectional\nlimits: {angle_min_deg: -120, angle_max_deg: 120}\n"
+        "segments:\n  - rotate: {by_deg: 60, speed_rpm: 30}\n    until: {settled: {tol_deg: 1.0, for_s: 0.05}}\n"
+    )
+    prepared = prepare(f)
+    sp = prepared.spec.safety
+    assert (sp.angle_limits, sp.angle_min_deg, sp.angle_max_deg) == (True, -120.0, 120.0)
+    _, result, rep = execute_task(prepared, tmp_path / "out")
+    assert rep["outcome"] == "completed"
+    assert not [e for e in result.safety_events if e.rule in ("soft_limit", "angle_limit")]
+    assert np.max(np.degrees(result.samples["theta"])) < 90.0  # inside the soft limit

@@ -8,7 +8,7 @@ A task file (YAML, read by the one strict reader :mod:`pneu_msgs_py.params.yaml_
     controllers:                     # dotted overrides of config/controllers.yaml, per axis
       rotary: {algorithm: ladrc}
     loads: {rotary.load.T_breakaway: 0.05}   # the twin's loads at the start (dotted plant fields)
-    limits: {angle_min_deg: -720, angle_max_deg: 720}   # optional angle soft limits
+    limits: {angle_min_deg: -720, angle_max_deg: 720}   # optional: the angles the tool tolerates
     segments:
       - move: {to_mm: 40, speed_mm_s: 40}
         until: {settled: {tol_mm: 0.5, for_s: 0.05}}
@@ -171,7 +171,17 @@ def parse_task(
         raise ParamError("plumbing", plumbing, "paper or bidirectional")
     controllers = _controllers(data.get("controllers", {}))
     loads = _mapping("loads", data.get("loads", {}))
-    limits = _limits(data.get("limits"))
+    limits = _tool_range(_limits(data.get("limits")), safety)
+    soft = None
+    if limits is not None:  # the supervisor's soft limits: angle_margin_deg inside the range
+        soft = (limits[0] + safety.angle_margin_deg, limits[1] - safety.angle_margin_deg)
+        if not soft[0] < soft[1]:
+            raise ParamError(
+                "limits",
+                f"[{limits[0]:g}, {limits[1]:g}]°",
+                f"a range wider than 2 × angle_margin_deg ({2 * safety.angle_margin_deg:g}°, "
+                "the supervisor's soft limits lie that far inside)",
+            )
     segs = data.get("segments")
     if not isinstance(segs, list) or not segs:
         raise ParamError("segments", segs, "a non-empty list of segments")
@@ -179,7 +189,7 @@ def parse_task(
     x, th = x0_m, theta0_rad
     out = []
     for i, raw in enumerate(segs):
-        seg = _segment(i, raw, x, th, safety, limits, one_way)
+        seg = _segment(i, raw, x, th, safety, soft, one_way)
         out.append(seg)
         x, th = seg.x_end, seg.theta_end
     return TaskProgram(
@@ -229,6 +239,21 @@ def _limits(v: Any) -> tuple[float, float] | None:
     return lo, hi
 
 
+def _tool_range(limits: tuple[float, float] | None, safety: Any) -> tuple[float, float] | None:
+    """The angles the tool tolerates: the task's ``limits`` within the supervisor's range
+    (``angle_limits`` on in safety.yaml); None when neither limits the angle."""
+    if safety.angle_limits:
+        own = (safety.angle_min_deg, safety.angle_max_deg)
+        limits = own if limits is None else (max(limits[0], own[0]), min(limits[1], own[1]))
+        if not limits[0] < limits[1]:
+            raise ParamError(
+                "limits",
+                "outside the supervisor's",
+                f"a range overlapping [{own[0]:g}, {own[1]:g}]°",
+            )
+    return limits
+
+
 def _number(key: str, v: Any, unit: str, *, positive: bool = False, nonzero: bool = False):
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ParamError(key, v, f"a number ({unit})")
@@ -262,7 +287,10 @@ def _segment(i: int, raw: Any, x: float, th: float, safety, limits, one_way: boo
             deg = value * DEG_PER_RAD
             if not limits[0] <= deg <= limits[1]:
                 raise ParamError(
-                    at, f"{deg:.6g}°", f"an angle inside limits [{limits[0]:g}, {limits[1]:g}]°"
+                    at,
+                    f"{deg:.6g}°",
+                    f"an angle inside the soft limits [{limits[0]:g}, {limits[1]:g}]° "
+                    "(the tool's range, angle_margin_deg inside)",
                 )
     until = _until(where, raw.get("until"), kind)
     default_timeout = dur + TIMEOUT_MARGIN_S

@@ -88,6 +88,12 @@ def prepare(
     program = load_task(task_file, safety=safety, plant_plumbing=base_plumbing)
     effective = plumbing or program.plumbing or base_plumbing
     safety = with_updates(safety, {"rotary_plumbing": effective})  # what the stall rule reads
+    if program.angle_limits_deg is not None:  # the tool's range: the supervisor enforces it
+        bound = 1.0e6  # SafetyParams.angle_min_deg/angle_max_deg's own range (one side open)
+        lo, hi = (min(max(v, -bound), bound) for v in program.angle_limits_deg)
+        safety = with_updates(
+            safety, {"angle_limits": True, "angle_min_deg": lo, "angle_max_deg": hi}
+        )
     updates: dict[str, Any] = (
         {"rotary.plumbing": effective} if hasattr(plant.rotary, "plumbing") else {}
     )
