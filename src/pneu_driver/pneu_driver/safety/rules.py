@@ -553,34 +553,49 @@ def watchdog_faults(th, s, now):
 
 
 @kernel
+def zone_changes(on_hi, on_lo, reach_lo, reach_hi, lo, hi, hyst):
+    """One axis' pair of soft-limit zones, entered where the reach (position plus the braking
+    way in the direction of motion) meets a limit, left ``hyst`` back (not latched): bits
+    1 high entered, 2 high left, 4 low entered, 8 low left."""
+    out = 0
+    if not on_hi and reach_hi >= hi:
+        out |= 1
+    elif on_hi and reach_hi < hi - hyst:
+        out |= 2
+    if not on_lo and reach_lo <= lo:
+        out |= 4
+    elif on_lo and reach_lo > lo + hyst:
+        out |= 8
+    return out
+
+
+@kernel
+def zone_after(on, changes, entered, left):
+    """A zone's flag after ``changes`` (its ``entered``/``left`` bits)."""
+    if changes & entered:
+        return 1
+    if changes & left:
+        return 0
+    return on
+
+
+@kernel
 def stroke_zone(th, s, d):
-    """Stroke soft limits with the braking distance v²/(2a), hysteresis on leaving (not
-    latched): what changed (``ZONE_*`` bits); ``d.braking_m`` when something did."""
+    """Stroke soft limits with the braking distance v²/(2a): what changed (``ZONE_*``
+    bits); ``d.braking_m`` when something did."""
     x = s.x
     v = s.v
     if not math.isfinite(x):
         return 0  # the sensor rules have made the linear axis safe
-    d_brake = v * v / (2.0 * th.max_decel_m_s2)
-    reach_hi = x + (d_brake if v > 0.0 else 0.0)
-    reach_lo = x - (d_brake if v < 0.0 else 0.0)
-    if not (s.zone_hi or s.zone_lo) and th.x_lo < reach_lo and reach_hi < th.x_hi:
-        return 0  # hot path: far from both limits
-    out = 0
-    if not s.zone_hi and reach_hi >= th.x_hi:
-        s.zone_hi = 1
-        out |= ZONE_HI_ENTERED
-    elif s.zone_hi and reach_hi < th.x_hi - th.stroke_hyst_m:
-        s.zone_hi = 0
-        out |= ZONE_HI_LEFT
-    if not s.zone_lo and reach_lo <= th.x_lo:
-        s.zone_lo = 1
-        out |= ZONE_LO_ENTERED
-    elif s.zone_lo and reach_lo > th.x_lo + th.stroke_hyst_m:
-        s.zone_lo = 0
-        out |= ZONE_LO_LEFT
-    if out:
-        d.braking_m = d_brake
-    return out
+    b = v * v / (2.0 * th.max_decel_m_s2)
+    reach_hi = x + (b if v > 0.0 else 0.0)
+    reach_lo = x - (b if v < 0.0 else 0.0)
+    c = zone_changes(s.zone_hi, s.zone_lo, reach_lo, reach_hi, th.x_lo, th.x_hi, th.stroke_hyst_m)
+    if c:
+        s.zone_hi = zone_after(s.zone_hi, c, 1, 2)
+        s.zone_lo = zone_after(s.zone_lo, c, 4, 8)
+        d.braking_m = b
+    return c  # ZONE_HI_ENTERED .. ZONE_LO_LEFT = 1, 2, 4, 8
 
 
 @kernel
@@ -588,7 +603,8 @@ def angle_zone(th, s, d):
     """Angle soft limits with the braking angle |ω| t_lag + ω²/(2a) (ω over the speed
     window), as the stroke's: what changed (``ANGLE_*`` bits); ``d.braking_rad`` when
     something did. The lag term: a held pneumatic motor turns on while its valve closes and
-    its chambers' air vents or is trapped (twin: ≈ ω · 10-19 ms at 5 V, 250-1700 rpm)."""
+    its chambers' air vents or is trapped (twin: ≈ ω · 10-19 ms at 5 V, 250-1700 rpm).
+    With the limits off (±inf) nothing is ever reached."""
     if not s.enc_have:
         return 0
     theta = s.enc_c * th.rad_per_count
@@ -596,24 +612,12 @@ def angle_zone(th, s, d):
     b = abs(w) * th.angle_lag_s + w * w / (2.0 * th.max_decel_rad_s2)
     reach_hi = theta + (b if w > 0.0 else 0.0)
     reach_lo = theta - (b if w < 0.0 else 0.0)
-    if not (s.azone_hi or s.azone_lo) and th.th_lo < reach_lo and reach_hi < th.th_hi:
-        return 0  # hot path: far from both limits (always, with the limits off: ±inf)
-    out = 0
-    if not s.azone_hi and reach_hi >= th.th_hi:
-        s.azone_hi = 1
-        out |= ANGLE_HI_ENTERED
-    elif s.azone_hi and reach_hi < th.th_hi - th.angle_hyst:
-        s.azone_hi = 0
-        out |= ANGLE_HI_LEFT
-    if not s.azone_lo and reach_lo <= th.th_lo:
-        s.azone_lo = 1
-        out |= ANGLE_LO_ENTERED
-    elif s.azone_lo and reach_lo > th.th_lo + th.angle_hyst:
-        s.azone_lo = 0
-        out |= ANGLE_LO_LEFT
-    if out:
+    c = zone_changes(s.azone_hi, s.azone_lo, reach_lo, reach_hi, th.th_lo, th.th_hi, th.angle_hyst)
+    if c:
+        s.azone_hi = zone_after(s.azone_hi, c, 1, 2)
+        s.azone_lo = zone_after(s.azone_lo, c, 4, 8)
         d.braking_rad = b
-    return out
+    return c << 4  # ANGLE_HI_ENTERED .. ANGLE_LO_LEFT = 16, 32, 64, 128
 
 
 @kernel
