@@ -26,6 +26,7 @@ setup(
         "pneu_msgs_py",
         "numpy>=1.26",
         "PyYAML>=6.0",
+        "filelock>=3.12",
         "nidaqmx>=1.7,<1.8",
     ],
     extras_require={"test": ["pytest"]},  # colcon test runs pytest when this names it

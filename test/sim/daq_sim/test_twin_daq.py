@@ -268,3 +268,28 @@ def test_a_killed_driver_leaves_the_valves_at_their_last_value(tmp_path):
     assert proc.wait(timeout=60) == 0
     done = read_card_state(card)
     assert (done.ao0_v, done.ao1_v, done.do_level) == (5.0, 5.0, False)
+
+
+def test_a_second_driver_on_the_same_card_is_refused_before_it_touches_it(tmp_path):
+    """Two graphs on one host (any ROS domain) never drive one card: the second driver is
+    refused in one line naming the first's pid, and the first runs on undisturbed."""
+    card = tmp_path / "card"
+    first = _start_driver(card)
+    try:
+        before = _wait_running(first, card)
+        second = subprocess.run(
+            [sys.executable, "-c", _DRIVER, str(card)], capture_output=True, text=True, timeout=300
+        )
+        assert second.returncode != 0
+        assert f"in use by another pneu driver (pid {first.pid})" in second.stderr
+        after = read_card_state(card)
+        assert after.pid == first.pid and after.ao1_v == 6.0  # still the first's card
+        assert after.do_edges > before.do_edges  # and its loop still beating
+    finally:
+        first.send_signal(signal.SIGTERM)
+        assert first.wait(timeout=60) == 0
+    # released: a new driver takes the card
+    again = _start_driver(card)
+    _wait_running(again, card)
+    again.send_signal(signal.SIGTERM)
+    assert again.wait(timeout=60) == 0

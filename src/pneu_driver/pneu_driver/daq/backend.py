@@ -35,6 +35,8 @@ class DaqBackend(Protocol):
     """
 
     hardware_paced: bool
+    #: the device this backend drives, held by one driver at a time (None: nothing shared)
+    device_id: str | None
 
     def open(self) -> None: ...
 
@@ -60,6 +62,7 @@ class SimBackend:
     """
 
     hardware_paced = False
+    device_id = None  # a plant in this process: nothing to share
 
     def __init__(self, plant: SteppablePlant, rig: RigParams):
         if not callable(getattr(plant, "step", None)):

@@ -186,6 +186,7 @@ class NidaqmxBackend:
         self.rig = rig
         lp = rig.loop
         self.hardware_paced = lp.timing == "hardware"
+        self.device_id = rig.device
         self._ci_clocked = self.hardware_paced and lp.ci_timing == "sample_clock"
         self._ao_clocked = self.hardware_paced and lp.ao_timing == "sample_clock"
         self._timeout = lp.read_timeout_s

@@ -43,6 +43,7 @@ from collections.abc import Callable, Iterable
 from pneu_msgs_py.contract.samples import AXES, SensorSample
 
 from pneu_driver.daq.backend import DaqBackend
+from pneu_driver.daq.claim import device_claim
 from pneu_driver.daq.errors import DriverError, LateCycleError
 from pneu_driver.daq.rig import RigParams
 from pneu_driver.daq.scaling import RawSample, Scaler
@@ -287,22 +288,18 @@ class DriverLoop:
         )
         self.realtime_notes = notes
         try:
-            self.backend.open()  # leaves the valves safe; cleans up after itself if it fails
-        except BaseException:
-            restore_rt()
-            raise
-        try:
-            try:
-                if self.hardware_paced:
-                    self._run_hardware(n_cycles, stop)
-                else:
-                    self._run_software(n_cycles, stop)
-            except BaseException:
-                self._shutdown(
-                    raise_errors=False
-                )  # the error that ended the loop is the one to see
-                raise
-            self._shutdown(raise_errors=True)
+            with device_claim(getattr(self.backend, "device_id", None)):  # one driver per card
+                self.backend.open()  # leaves the valves safe; cleans up after itself on failure
+                try:
+                    if self.hardware_paced:
+                        self._run_hardware(n_cycles, stop)
+                    else:
+                        self._run_software(n_cycles, stop)
+                except BaseException:
+                    # the error that ended the loop is the one to see
+                    self._shutdown(raise_errors=False)
+                    raise
+                self._shutdown(raise_errors=True)
         finally:
             restore_rt()
         return self.stats

@@ -81,6 +81,8 @@ class TwinDaq:
         self.rig = rig
         self.plant = plant
         self.card = card if card is not None else CardRegister()
+        # a card in a file outlives the process and may be driven from another: claim it
+        self.device_id = f"card:{self.card.path.resolve()}" if self.card.path else None
         self._scaling = SensorScaling(plant.params)
         self._stalls = sorted((float(t), float(d)) for t, d in stalls)
         self._clock = clock_ns
