@@ -115,3 +115,10 @@ def test_names_and_the_enclave_each_executable_starts_in():
     assert S.select_enclave("sim_node", {}, []) is None  # security off: nothing set
     for exe, role in S.EXECUTABLE_ROLE.items():
         assert role in S.ROLES, exe
+
+
+def test_a_second_driver_or_sim_on_the_domain_is_named(monkeypatch):
+    monkeypatch.setenv("ROS_DOMAIN_ID", "83")
+    assert S.second_io({t: 1 for t in PRESSURE_TOPICS}) is None
+    msg = S.second_io({"/pneu/pressure/cylinder_1": 1, "/pneu/linear/joint_state": 3})
+    assert "/pneu/linear/joint_state on ROS_DOMAIN_ID 83 (2 more" in msg and "e-stop" in msg

@@ -115,6 +115,7 @@ class DriverNode(ShellDefaults, Node):
         self.done = Future()
         self.events: collections.deque = collections.deque(maxlen=10000)
         self.stamp_offset_ns: int | None = None
+        self.second_io = ""
         self.thread: threading.Thread | None = None
         self.device = (
             rig.device if backend_kind(backend) == "nidaqmx" else f"{backend} ({rig.device})"
@@ -277,6 +278,7 @@ class DriverNode(ShellDefaults, Node):
             # percentiles over the last second: cheap on the executor thread taking the commands
             for k, v in self.loop.stats.as_dict(last=round(self.loop.rig.loop.rate_hz)).items()
         }
+        self._watch_graph()
         counts = {a: sub.get_publisher_count() for a, sub in self.cmd_subs.items()}
         if counts:  # a second publisher is reported and, with publisher_trip, trips the axis
             self.loop.command_publishers(counts)
@@ -301,6 +303,16 @@ class DriverNode(ShellDefaults, Node):
         self._publish(statuses)
         if self.thread is not None and not running and not self.done.done():
             self.done.set_result(err)  # the loop ended (error or stop): leave spin
+
+    def _watch_graph(self) -> None:
+        """Another driver or sim publishing samples on this domain: e-stop, said once."""
+        from pneu_msgs_py.contract.security import second_io
+
+        msg = second_io({t: self.count_publishers(t) for t in SENSOR_TOPICS})
+        if msg and not self.second_io:
+            self.second_io = msg
+            self.loop.estop(msg)
+            self.get_logger().error(msg)
 
     def _publish(self, statuses, stamp_ns: int | None = None) -> None:
         now = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns

@@ -22,6 +22,7 @@ forgotten and is denied by default.
 
 from __future__ import annotations
 
+import os
 import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -37,6 +38,7 @@ __all__ = [
     "operator_enclave",
     "EXECUTABLE_ROLE",
     "policy_xml",
+    "second_io",
     "select_enclave",
 ]
 
@@ -230,3 +232,21 @@ def policy_xml(operators: tuple[str, ...] = ()) -> str:
         _profile(profiles, "*", "operator", (), [*safety, *task, *_all_parameter_services()])
     ET.indent(root)
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def second_io(sample_publishers: dict[str, int]) -> str | None:
+    """Another driver or sim on this domain? ``sample_publishers``: the publisher count the
+    graph shows on each sample topic (this node's own included). A sentence saying so, or None.
+
+    Two graphs on one domain would feed each one's controllers the other's samples; the
+    node that sees it latches its e-stop (design §13).
+    """
+    extra = {t: n - 1 for t, n in sample_publishers.items() if n > 1}
+    if not extra:
+        return None
+    domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    worst = max(extra, key=extra.get)
+    return (
+        f"another driver or sim publishes {worst} on ROS_DOMAIN_ID {domain} "
+        f"({extra[worst]} more publisher(s)): two graphs on one domain; e-stop latched"
+    )

@@ -105,6 +105,7 @@ class SimNode(ShellDefaults, Node):
         self.n_end = round(p.duration_s / plant.T) if p.duration_s > 0 else 0
         self.done = Future()
         self.halted = ""  # e-stopped without a supervisor: time stands still
+        self.second_io = ""  # another sim or driver seen on the domain
         self.crashed: dict[str, str] = {}  # hosted controllers that raised
         from rclpy import qos as rq
 
@@ -370,6 +371,21 @@ class SimNode(ShellDefaults, Node):
                 self._advance()
         return response
 
+    def _watch_graph(self) -> None:
+        """Another sim or driver publishing samples on this domain: e-stop (or halt), said once."""
+        from pneu_msgs_py.contract.security import second_io
+
+        msg = second_io({t: self.count_publishers(t) for t in self.pubs})
+        if not msg or self.second_io:
+            return
+        self.second_io = msg
+        self.get_logger().error(msg)
+        if self.supervisor is not None:
+            with self._locked():
+                self.supervisor.estop(msg)
+        else:
+            self.halted = msg
+
     def _watch_publishers(self) -> dict[str, str]:
         """The publishers the graph shows on each command topic, to the supervisor (a second one
         is reported and, with ``publisher_trip``, trips that axis)."""
@@ -410,6 +426,7 @@ class SimNode(ShellDefaults, Node):
             mode=self.p.mode, sim_time_s=f"{sim_s:.3f}", real_time_factor=f"{sim_s / elapsed:.3g}"
         )
         if periodic:
+            self._watch_graph()
             values.update(self._watch_publishers())
         msg = (
             "halted: " + self.halted
