@@ -127,6 +127,14 @@ def test_diagnostics_report_counts_and_warn_on_lost_ticks_and_bad_payloads():
     assert st.level == 1 and st.values["incomplete_ticks"] == "1" and st.values["samples"] == "1"
     assert st.values["malformed_payloads"] == "1"
     assert st.values["algorithm"] == core.controller.algorithm
+    # no sample since that report: the driver or sim is gone, and the controller says so
+    (st,) = core.diagnostics("linear_controller")
+    assert st.level == 2 and "driver or sim stopped or is gone; not commanding" in st.message
+    _, m2 = tick(2)
+    for t in core.topics:
+        core.step_raw(t, m2[t])
+    (st,) = core.diagnostics("linear_controller")
+    assert st.level == 1 and "no samples" not in st.message  # samples again
 
 
 def test_live_parameter_change_takes_effect_at_the_next_sample():

@@ -151,6 +151,7 @@ class ControllerShellCore:
         self.state_every = int(state_every)
         self._period_ns = round(params.sample_time_s * 1e9)
         self.n_samples = 0
+        self._samples_seen = 0  # n_samples at the last diagnostics
         self.n_saturated = 0
         self.last_stamp_ns = -1
         self.last_u = _NAN
@@ -269,7 +270,16 @@ class ControllerShellCore:
         refused = self.n_trajectories_refused
         level = 1 if (a.incomplete or a.late or nonfinite or self.n_bad or refused) else 0
         msg = "running" if self.n_samples else "waiting for samples"
-        if level:
+        # samples before, none since the last report (1 s): the driver or sim stopped or is gone
+        stopped = self.n_samples and self.n_samples == self._samples_seen
+        self._samples_seen = self.n_samples
+        if stopped:
+            level = 2
+            msg = (
+                f"no samples since the last report (last stamp {self.last_stamp_ns} ns): "
+                "the driver or sim stopped or is gone; not commanding"
+            )
+        elif level:
             msg = (
                 f"{a.incomplete} incomplete / {a.late} late ticks, {nonfinite} non-finite "
                 f"inputs, {self.n_bad} malformed payloads, {refused} trajectories refused"

@@ -91,6 +91,7 @@ class ControllerNode(ShellDefaults, Node):
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
 
+        self._said_gone = False  # "no samples" logged (once per stop)
         self._create_topics(mode, hosted)
         # diagnostics at 1 Hz of wall time (steady clock): works whether /clock runs or not,
         # and with executors whose timers do not follow sim time; stamps use the node clock
@@ -224,6 +225,10 @@ class ControllerNode(ShellDefaults, Node):
     # -- reports and shutdown ----------------------------------------------
     def _publish_diagnostics(self) -> None:
         statuses = self.core.diagnostics(self.get_name())
+        gone = statuses[0].level == 2
+        if gone and not self._said_gone:
+            self.get_logger().warning(statuses[0].message)
+        self._said_gone = gone
         now = self.get_clock().now().nanoseconds
         self.diag_pub.publish(
             fill_diagnostic_array(DiagnosticArray(), DiagnosticStatus, KeyValue, now, statuses)
