@@ -2,7 +2,7 @@
 
 The policy is parsed with an independent XML reader and expanded as sros2's
 ``permissions.xsl`` expands names (``~/x`` = the profile's node); the properties are
-the security claims of design §13, checked for every topic of the table.
+the security claims of DESIGN §13, checked for every topic of the table.
 """
 
 from __future__ import annotations

@@ -519,7 +519,7 @@ def command(th, s, axis, u, stamp):
     (``CMD_*`` bits; 0: taken, nothing to report). A command answers a sample that was
     taken: one stamped after the newest sample (a clock gone wrong, or a publisher that is
     not a controller) or older than the watchdog (a replay) is not taken and keeps no
-    watchdog alive (design §3)."""
+    watchdog alive (DESIGN §3)."""
     if not s.have_sample or stamp > s.sample_t:
         return CMD_FUTURE
     if s.sample_t - stamp > th.watchdog_ns:

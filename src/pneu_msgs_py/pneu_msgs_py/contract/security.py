@@ -4,7 +4,7 @@ DDS-Security (SROS2) authenticates each process by its enclave's certificate and
 lets it publish, subscribe, call and serve only what its signed permissions list.
 The graph's permissions are written here once, per *role*, and rendered as an SROS2
 policy (``policy.xsd`` 0.2.0) that ``pneu_msgs_py security`` (the shell in
-:mod:`pneu_msgs_py.nodes.security`) turns into a keystore (design §13):
+:mod:`pneu_msgs_py.nodes.security`) turns into a keystore (DESIGN §13):
 
 - only the driver / sim (role ``io``) publishes the samples and ``/clock``;
 - only the axis' controller (and, for an excitation, the exciter) publishes its
@@ -239,7 +239,7 @@ def second_io(sample_publishers: dict[str, int]) -> str | None:
     graph shows on each sample topic (this node's own included). A sentence saying so, or None.
 
     Two graphs on one domain would feed each one's controllers the other's samples; the
-    node that sees it latches its e-stop (design §13).
+    node that sees it latches its e-stop (DESIGN §13).
     """
     extra = {t: n - 1 for t, n in sample_publishers.items() if n > 1}
     if not extra:

@@ -145,7 +145,7 @@ def node_entry(module: str, func: str = "main") -> Callable[..., int]:
 
 
 def _before_init(name: str, args: list[str] | None) -> None:
-    """The process's enclave with security on (design §13); the sim on localhost-only
+    """The process's enclave with security on (DESIGN §13); the sim on localhost-only
     discovery unless the user chose a range (a twin has no business on the lab network)."""
     from pneu_msgs_py.contract.security import select_enclave
 

@@ -6,7 +6,7 @@ and encryption on), one enclave per role of
 :data:`pneu_msgs_py.contract.security.ROLES` and per operator, each enclave's
 permissions signed from :func:`~pneu_msgs_py.contract.security.policy_xml` (kept in
 ``KEYSTORE/pneu_policy.xml``). Permissions are bound to the domain in
-``ROS_DOMAIN_ID`` (as ``ros2 security`` binds them). Design §13.
+``ROS_DOMAIN_ID`` (as ``ros2 security`` binds them). DESIGN §13.
 """
 
 from __future__ import annotations
