@@ -95,7 +95,7 @@ def _row(t: TopicSpec) -> tuple[tuple[str, ...], tuple[str, ...]]:
         own = _CONTROLLER[t.axis]
         return (own, "controller_manager", "exciter"), ("io", "controller_manager", *_READERS)
     if t.kind == "controller_state":
-        return (_CONTROLLER[t.axis], "controller_manager"), _READERS
+        return (_CONTROLLER[t.axis], "controller_manager", "exciter"), _READERS
     if t.kind == "trajectory":  # the task runner, or an operator's own planner
         return ("task_runner", "operator"), (
             "linear_controller",
