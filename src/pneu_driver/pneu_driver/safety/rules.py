@@ -553,10 +553,12 @@ def watchdog_faults(th, s, now):
 
 
 @kernel
-def zone_changes(on_hi, on_lo, reach_lo, reach_hi, lo, hi, hyst):
-    """One axis' pair of soft-limit zones, entered where the reach (position plus the braking
-    way in the direction of motion) meets a limit, left ``hyst`` back (not latched): bits
-    1 high entered, 2 high left, 4 low entered, 8 low left."""
+def zone_changes(on_hi, on_lo, pos, vel, brake, lo, hi, hyst):
+    """One axis' pair of soft-limit zones, entered where the reach (``pos`` plus the braking
+    way ``brake`` in the direction of ``vel``) meets a limit, left ``hyst`` back (not
+    latched): bits 1 high entered, 2 high left, 4 low entered, 8 low left."""
+    reach_hi = pos + (brake if vel > 0.0 else 0.0)
+    reach_lo = pos - (brake if vel < 0.0 else 0.0)
     out = 0
     if not on_hi and reach_hi >= hi:
         out |= 1
@@ -588,9 +590,7 @@ def stroke_zone(th, s, d):
     if not math.isfinite(x):
         return 0  # the sensor rules have made the linear axis safe
     b = v * v / (2.0 * th.max_decel_m_s2)
-    reach_hi = x + (b if v > 0.0 else 0.0)
-    reach_lo = x - (b if v < 0.0 else 0.0)
-    c = zone_changes(s.zone_hi, s.zone_lo, reach_lo, reach_hi, th.x_lo, th.x_hi, th.stroke_hyst_m)
+    c = zone_changes(s.zone_hi, s.zone_lo, x, v, b, th.x_lo, th.x_hi, th.stroke_hyst_m)
     if c:
         s.zone_hi = zone_after(s.zone_hi, c, 1, 2)
         s.zone_lo = zone_after(s.zone_lo, c, 4, 8)
@@ -610,9 +610,7 @@ def angle_zone(th, s, d):
     theta = s.enc_c * th.rad_per_count
     w = s.w
     b = abs(w) * th.angle_lag_s + w * w / (2.0 * th.max_decel_rad_s2)
-    reach_hi = theta + (b if w > 0.0 else 0.0)
-    reach_lo = theta - (b if w < 0.0 else 0.0)
-    c = zone_changes(s.azone_hi, s.azone_lo, reach_lo, reach_hi, th.th_lo, th.th_hi, th.angle_hyst)
+    c = zone_changes(s.azone_hi, s.azone_lo, theta, w, b, th.th_lo, th.th_hi, th.angle_hyst)
     if c:
         s.azone_hi = zone_after(s.azone_hi, c, 1, 2)
         s.azone_lo = zone_after(s.azone_lo, c, 4, 8)
