@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,9 +49,17 @@ def check_seed(seed: object, field: str = "--seed") -> int:
     return seed
 
 
-def parse_sets(items: Iterable[str], axes: tuple[str, ...]) -> dict[str, dict[str, Any]]:
-    """``["eso_smc.epsilon=900", "rotary.pid.kp=0.3"]`` -> per-axis dotted overrides."""
+def parse_sets(
+    items: Iterable[str], axes: tuple[str, ...], taken: Mapping[str, str] | None = None
+) -> dict[str, dict[str, Any]]:
+    """``["eso_smc.epsilon=900", "rotary.pid.kp=0.3"]`` -> per-axis dotted overrides.
+
+    Each key once per axis (``eso_smc.epsilon`` and ``linear.eso_smc.epsilon`` are the same
+    key), and none that another option sets (``taken``: key -> that option, e.g.
+    ``algorithm`` -> ``--controller``): the last would silently win.
+    """
     out: dict[str, dict[str, Any]] = {axis: {} for axis in axes}
+    first: dict[tuple[str, str], str] = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key:
@@ -65,6 +73,19 @@ def parse_sets(items: Iterable[str], axes: tuple[str, ...]) -> dict[str, dict[st
                 )
             targets, key = (head,), rest
         for axis in targets:
+            if (taken or {}).get(key):
+                raise ParamError(
+                    f"--set {item.partition('=')[0]}",
+                    value,
+                    f"a key no other option sets ({taken[key]} sets {key})",
+                )
+            if (axis, key) in first:
+                raise ParamError(
+                    f"--set {item.partition('=')[0]}",
+                    value,
+                    f"each key once per axis (already --set {first[axis, key]} for {axis})",
+                )
+            first[axis, key] = item
             out[axis][key] = parse_value(value)
     return out
 
@@ -178,6 +199,8 @@ def _check_options(o: RunOptions) -> float:
     if o.controller is not None and o.controller not in ALGORITHMS:
         raise ParamError("--controller", o.controller, "one of " + ", ".join(ALGORITHMS))
     check_seed(o.seed)
+    if o.safety is False and o.safety_file is not None:  # no supervisor would read it
+        raise ParamError("--safety", str(o.safety_file), "not with --no-safety (one or the other)")
     w = o.window_start_s
     if w is not None and not (isinstance(w, (int, float)) and 0.0 <= w < duration_s):
         raise ParamError("--window-start", w, f"[0, {duration_s:g}) s: inside the run")
@@ -186,8 +209,10 @@ def _check_options(o: RunOptions) -> float:
 
 def _controllers(o: RunOptions) -> tuple[dict[str, Any], dict[str, WindowSpec]]:
     """Each axis's controller parameters (file, then reference, algorithm and --set) and window."""
-    per_axis = parse_sets(o.sets, o.axes)
     ref = o.reference if isinstance(o.reference, dict) else parse_reference(o.reference)
+    by = "--reference" if isinstance(o.reference, str) else "the experiment's reference"
+    taken = dict.fromkeys(ref, by) | ({"algorithm": "--controller"} if o.controller else {})
+    per_axis = parse_sets(o.sets, o.axes, taken)
     controllers: dict[str, Any] = {}
     windows: dict[str, WindowSpec] = {}
     for axis in o.axes:
