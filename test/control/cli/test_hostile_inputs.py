@@ -341,5 +341,207 @@ def test_a_full_disk_mid_run_is_one_line_and_leaves_no_partial(tmp_path):
     assert not out.exists() or not [p for p in out.iterdir() if p.name.endswith(".partial")]
 
 
+# ------------------------------------------------- refused option combinations
+@pytest.fixture(scope="module")
+def short_bag(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("bag") / "run"
+    rc, _, err = pneu(*RUN[:-1], "0.3", "--out", out)
+    assert rc in (0, 3), err
+    return out / "run.mcap"
+
+
+@pytest.mark.parametrize(
+    "argv, field",
+    [
+        ([*RUN, "--duration", "600"], "--duration"),  # the last would silently win
+        ([*RUN, "--dur", "600"], "--duration"),  # an abbreviation is the same option
+        ([*RUN, "--overwrite", "--overwrite"], "--overwrite"),
+        (["identify", "b.mcap", "--out", "p.yaml", "--out", "q.yaml"], "--out"),
+    ],
+)
+def test_an_option_given_twice_is_refused(tmp_path, argv, field):
+    line = refused(*argv, "--out", tmp_path / "o", field=f"argument {field}",
+                   allowed="each option once")  # fmt: skip
+    assert "given twice" in line and not (tmp_path / "o").exists()
+
+
+def test_repeatable_options_still_repeat(tmp_path):
+    rc, _, err = pneu(*RUN, "--out", tmp_path / "o", "--set", "pid.kp=1",
+                      "--set", "pid.ki=0", "--fault", "noise_burst:start_s=0.01,duration_s=0.01",
+                      "--fault", "noise_burst:start_s=0.03,duration_s=0.01")  # fmt: skip
+    assert rc in (0, 3), err
+    doc = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert doc["config"]["controllers"]["linear"]["pid"]["kp"] == 1.0
+    assert len(doc["config"]["faults"]) == 2
+
+
+@pytest.mark.parametrize(
+    "extra, field, allowed",
+    [
+        (["--set", "pid.kp=1", "--set", "linear.pid.kp=2"], "--set linear.pid.kp",
+         "each key once per axis (already --set pid.kp=1"),
+        (["--set", "algorithm=ladrc"], "--set algorithm", "--controller sets algorithm"),
+        (["--reference", "constant:value=3", "--set", "reference.value=4"],
+         "--set reference.value", "--reference sets reference.value"),
+        (["--safety", "none.yaml", "--no-safety"], "--safety", "not with --no-safety"),
+    ],
+)  # fmt: skip
+def test_a_value_set_twice_is_refused(tmp_path, extra, field, allowed):
+    refused(*RUN, "--out", tmp_path / "o", *extra, field=field, allowed=allowed)
+    assert not (tmp_path / "o").exists()
+
+
+def test_replay_refuses_an_algorithm_set_twice(tmp_path, short_bag):
+    refused("replay", short_bag, "--out", tmp_path / "r.mcap", "--controller", "pid",
+            "--set", "algorithm=ladrc", field="--set algorithm",
+            allowed="--controller sets algorithm")  # fmt: skip
+    assert not (tmp_path / "r.mcap").exists()
+
+
+@pytest.mark.parametrize(
+    "extra, field, allowed",
+    [
+        (["--duration", "5"], "--duration", "only with --reference"),
+        (["--axis", "rotary"], "--axis", "only with --reference"),
+        (["--window-start", "1"], "--window-start", "only with --reference"),
+        (["--executor", "serial", "--workers", "2"], "--workers",
+         "(serial runs in this process)"),
+        (["--executor", "dask", "--address", "tcp://127.0.0.1:1", "--workers", "2"],
+         "--workers", "the cluster at --address has its own"),  # refused before any probe
+    ],
+)  # fmt: skip
+def test_sweep_options_that_would_be_ignored_are_refused(tmp_path, extra, field, allowed):
+    refused("sweep", "--out", tmp_path / "o", "--samples", "1", "--experiment",
+            "smooth_step_eq38", *extra, field=field, allowed=allowed)  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "extra", [["--executor", "serial"], ["--workers", "2"], ["--sampler", "sobol"]]
+)
+def test_paper_executor_options_only_with_a_band_stage(tmp_path, extra):
+    refused("paper", "--out", tmp_path / "o", "--only", "smooth_step_eq38", *extra,
+            field=extra[0], allowed="only with --uncertainty N")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "extra, field",
+    [
+        (["--hold", "linear=5", "--controller", "pid"], "--controller"),
+        (["--hold", "linear=5", "--reference", "constant:value=3"], "--reference"),
+        (["--axis", "both", "--hold", "linear=5,rotary=5", "--set", "pid.kp=1"], "--set"),
+    ],
+)
+def test_rig_refuses_controller_options_when_every_axis_is_held(tmp_path, extra, field):
+    refused("rig", "--backend", "sim", "--duration", "0.05", "--out", tmp_path / "o", *extra,
+            field=field, allowed="only for an axis a controller runs on")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_window_start_after_the_run_is_refused(short_bag):
+    refused("analyze", short_bag, "--window-start", "1e9", field="--window-start",
+            allowed="inside the run (its last sample is at 0.299 s)")  # fmt: skip
+    rc, out, err = pneu("analyze", short_bag, "--window-start", "0.2")
+    assert rc == 0 and "window 0.20–0.30 s" in out, err
+
+
+# ----------------------------------------------------------- numbers as typed
+@pytest.mark.parametrize(
+    "argv, field",
+    [
+        (["sim", "--duration", "0.05", "--no-plot", "--linear-voltage", "0_5"],
+         "--linear-voltage"),  # Python's float would read 5 V
+        ([*RUN, "--live", "8_765"], "--live"),
+        ([*RUN, "--live", "0", "--live-wait", "0_1"], "--live-wait"),  # 1 s, not 0.1 s
+    ],
+)  # fmt: skip
+def test_numbers_of_every_option_read_as_typed(tmp_path, argv, field):
+    refused(*argv, "--out", tmp_path / "o", field=f"argument {field}", allowed="not a number"
+            if field != "--live" else "not an integer")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------- recover, read-only
+def test_a_cut_bag_recovers_onto_its_own_final_name(tmp_path, short_bag):
+    """``pneu recover run.mcap.partial --out run.mcap`` (what a kill leaves, onto the name it
+    was to have): written as run.mcap.new.partial, the source kept byte for byte."""
+    from mcap_ros2.reader import read_ros2_messages
+
+    d = tmp_path / "killed"
+    d.mkdir()
+    cut = d / "run.mcap.partial"
+    data = short_bag.read_bytes()
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    rc, out, err = pneu("recover", cut, "--out", d / "run.mcap")
+    assert rc == 0, err
+    assert "recovered" in out and f"kept {cut}" in out
+    assert cut.read_bytes() == data[: len(data) * 2 // 3]
+    assert sorted(p.name for p in d.iterdir()) == ["run.mcap", "run.mcap.partial"]
+    n = sum(1 for _ in read_ros2_messages(str(d / "run.mcap")))  # complete, indexed
+    assert n > 0
+    refused("recover", cut, "--out", d / "run.mcap", field="--out", allowed="--overwrite")
+    rc, _, err = pneu("recover", cut, "--out", d / "run.mcap", "--overwrite")
+    assert rc == 0 and cut.exists(), err
+
+
+def test_a_partial_left_by_a_killed_command_is_named_first(tmp_path, short_bag):
+    stale = tmp_path / "r.mcap.partial"
+    stale.write_bytes(b"half a bag")
+    line = refused("recover", short_bag, "--out", tmp_path / "r.mcap", field="--out",
+                   allowed="r.mcap.partial is left by a command that did not finish")  # fmt: skip
+    assert "pneu recover it" in line and stale.read_bytes() == b"half a bag"
+    rc, _, err = pneu("recover", short_bag, "--out", tmp_path / "r.mcap", "--overwrite")
+    assert rc == 0 and not stale.exists() and (tmp_path / "r.mcap").exists(), err
+
+
+def test_a_read_only_file_system_is_named_as_such(tmp_path, monkeypatch):
+    """On a read-only file system access(W_OK) fails too (EROFS, even for root): the line
+    says read-only, not 'permission denied'."""
+    real = os.statvfs
+
+    class Ro:
+        def __init__(self, path):
+            st = real(path)
+            self.f_frsize, self.f_bavail, self.f_flag = st.f_frsize, st.f_bavail, os.ST_RDONLY
+
+    monkeypatch.setattr(os, "statvfs", Ro)
+    monkeypatch.setattr(os, "access", lambda *a, **k: False)
+    line = refused(*RUN, "--out", tmp_path / "o", field="--out",
+                   allowed="is on a read-only file system")  # fmt: skip
+    assert "permission denied" not in line
+
+
+def test_a_real_read_only_mount_is_named_as_such(tmp_path):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "none", str(ro)],
+                      capture_output=True).returncode != 0:  # fmt: skip
+        pytest.skip("cannot mount a read-only tmpfs here (not root)")
+    try:
+        for argv in ([*RUN, "--out", ro / "o"], ["tune", "--out", ro / "t.yaml"]):
+            refused(*argv, field="--out", allowed="is on a read-only file system")
+    finally:
+        subprocess.run(["umount", str(ro)], check=True)
+
+
+def test_numbas_note_on_record_subtypes_is_not_shown():
+    """Compiling the fast loop (a fresh clone, an empty numba cache) passes each
+    algorithm's state record where the base record is taken: by design; numba's ~2 kB
+    note on it is not a warning line for the user."""
+    from numba.core.errors import NumbaExperimentalFeatureWarning
+    from pneu_control.fastloop import loop  # importing it installs the filter
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.warn_explicit(
+            "Record(z1[type=float64;offset=0],k[type=int64;offset=8];16;False) has been "
+            "considered a subtype of Record(z1[type=float64;offset=0];8;False)  This is an "
+            "experimental feature.",
+            NumbaExperimentalFeatureWarning, loop.__file__, 130,
+        )  # fmt: skip
+        warnings.warn_explicit("another note", NumbaExperimentalFeatureWarning, loop.__file__, 1)
+    assert [str(w.message) for w in seen] == ["another note"]
+
+
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-q"]))
