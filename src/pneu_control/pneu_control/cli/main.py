@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import signal
 import sys
 import warnings
@@ -48,6 +49,11 @@ class UserError(Exception):
     """An error the user can fix; printed as one line (exit 2)."""
 
 
+_NEGATIVE = re.compile(
+    r"^-(?:[0-9][0-9_:]*\.?[0-9_]*|\.[0-9][0-9_]*)(?:e[-+]?[0-9]+)?$"
+    r"|^-(?:inf|infinity|nan|\.inf|0x[0-9a-f]+|0o[0-7]+)$",
+    re.IGNORECASE,
+)
 _REPEATABLE = (argparse._AppendAction, argparse._CountAction, argparse._ExtendAction)
 
 
@@ -68,6 +74,9 @@ class _Parser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
+        # a value that reads as a negative number is a value, not an option: argparse's own
+        # rule takes only -5 and -.5 ('--duration -inf' or '-1e3': "expected one argument")
+        self._negative_number_matcher = _NEGATIVE
         self.register("type", float, lambda t: _number_as_typed(t, float))
         self.register("type", int, lambda t: _number_as_typed(t, int))
 
