@@ -18,7 +18,7 @@ from pneu_msgs_py.lifecycle import signals
 from pneu_msgs_py.lifecycle.duration import check_duration
 from pneu_msgs_py.lifecycle.outputs import OutputDir
 from pneu_msgs_py.live.sink import Tee
-from pneu_msgs_py.params.core import ParamError, to_dict
+from pneu_msgs_py.params.core import ParamError, to_dict, unknown_key
 from pneu_msgs_py.params.spec import parse_spec, parse_value
 from pneu_msgs_py.params.yaml_file import from_option
 
@@ -95,7 +95,26 @@ def parse_reference(text: str | None) -> dict[str, Any]:
     if not text:
         return {}
     kind, values = parse_spec(text, "--reference")
+    check_reference_keys(kind, values, f"--reference {kind}")
     return {"reference.kind": kind, **{f"reference.{k}": v for k, v in values.items()}}
+
+
+def check_reference_keys(kind: str, keys: Iterable[str], field: str) -> None:
+    """Refuse an unknown reference kind, and a key the kind does not read (it would be
+    silently ignored: ``constant:value=5,amplitude=3``)."""
+    from pneu_control.controller.params import REFERENCE_KEYS
+
+    if kind not in REFERENCE_KEYS:
+        raise ParamError("--reference", kind, "a kind: one of " + ", ".join(REFERENCE_KEYS))
+    for key in keys:
+        if key not in REFERENCE_KEYS[kind]:
+            raise ParamError(
+                f"{field}",
+                key,
+                unknown_key(key, REFERENCE_KEYS[kind]).replace(
+                    "no such parameter", f"a key of a {kind} reference"
+                ),
+            )
 
 
 def rotary_average_s(speed_rpm: float) -> float:
@@ -226,6 +245,9 @@ def _controllers(o: RunOptions) -> tuple[dict[str, Any], dict[str, WindowSpec]]:
             params = load_controller_params(axis, o.controllers_file, overrides)
         except ParamError as err:  # an override's: named with its axis
             raise ParamError(f"{axis}.{err.key}", err.value, err.allowed) from None
+        kind = params.reference.kind  # a --set reference.KEY the kind reads, too
+        sets = [k.partition(".")[2] for k in per_axis[axis] if k.startswith("reference.")]
+        check_reference_keys(kind, [k for k in sets if k != "kind"], f"--set reference ({kind})")
         controllers[axis] = params
         windows[axis] = window_for(axis, params.reference, o.window_start_s)
     return controllers, windows
