@@ -543,5 +543,125 @@ def test_numbas_note_on_record_subtypes_is_not_shown():
     assert [str(w.message) for w in seen] == ["another note"]
 
 
+@pytest.mark.parametrize("value", ["-inf", "-1e3", "-.5e2"])
+def test_a_negative_number_is_a_value_not_an_option(tmp_path, value):
+    """argparse takes only -5 and -.5 for numbers: '--window-start -1e3' was "expected one
+    argument"; now the option's own range refuses it."""
+    refused(*RUN, "--out", tmp_path / "o", "--window-start", value, field="--window-start",
+            allowed="inside the run")  # fmt: skip
+
+
+# ---------------------------------------------------------------- config files
+@pytest.mark.parametrize(
+    "text, allowed",
+    [
+        ("watchdog_ms: 100\x00\n", ":1:17: control character 0x00; allowed: text"),
+        # nine aliases of nine aliases ...: 4e8 values from a few hundred bytes, at a key that
+        # exists (shown or walked, it never ended)
+        ("watchdog_ms: [" + "".join(f"&{c} [" for c in "abcdefghi") + "x" + "".join(
+            "]" + f", *{c}" * 8 for c in "abcdefghi"[::-1]) + "]\n",
+         "its aliases (*name) expand"),
+    ],
+)  # fmt: skip
+def test_a_config_file_with_control_characters_or_a_yaml_bomb_is_one_line(tmp_path, text, allowed):
+    bad = tmp_path / "safety.yaml"
+    bad.write_text(text)
+    refused(*RUN, "--out", tmp_path / "o", "--safety", bad, field="--safety", allowed=allowed)
+
+
+@pytest.mark.parametrize(
+    "reference, field, allowed",
+    [
+        ("constant:value=5,amplitude=3", "--reference constant", "a key of a constant reference"),
+        ("constant:value=5,t0_s=1", "--reference constant", "known: value"),
+        ("sine:amplitud=5", "--reference sine", "did you mean amplitude?"),
+        ("x:y=1", "--reference", "a kind: one of sine"),  # the kind, not its key
+    ],
+)
+def test_a_reference_key_its_kind_does_not_read_is_refused(tmp_path, reference, field, allowed):
+    refused(*RUN, "--out", tmp_path / "o", "--reference", reference, field=field, allowed=allowed)
+
+
+def test_a_set_reference_key_its_kind_does_not_read_is_refused(tmp_path):
+    refused(*RUN, "--out", tmp_path / "o", "--set", "reference.kind=constant", "--set",
+            "reference.amplitude=3", field="--set reference (constant)",
+            allowed="a key of a constant reference")  # fmt: skip
+
+
+# ----------------------------------------------------------------- waypoints
+def _reference_of(out: Path) -> list[float]:
+    import numpy as np
+
+    return list(np.load(out / "timeseries.npz")["linear.reference"][:2] * 1e3)
+
+
+def test_a_waypoint_file_with_a_bom_keeps_its_first_row(tmp_path):
+    wp = tmp_path / "w.csv"
+    wp.write_bytes(b"\xef\xbb\xbf" + b"0,0\n1,5\n2,5\n")  # Excel's UTF-8: a BOM first
+    rc, _, err = pneu(*RUN, "--out", tmp_path / "o", "--reference", f"waypoints:file={wp}")
+    assert rc in (0, 3), err
+    assert _reference_of(tmp_path / "o")[0] == pytest.approx(0.0, abs=1e-6)  # not 5: row kept
+
+
+@pytest.mark.parametrize(
+    "name, text, field, allowed",
+    [
+        ("three.csv", "0,0,7\n1,5,9\n", "reference.file[row 1]", "two columns t, value"),
+        ("extra.yaml", "t: [0, 1]\nvalue: [0, 5]\nextra: 1\n", "reference.file",
+         "(it has keys extra, t, value)"),
+        ("t.yaml", "t: 5\nvalue: 3\n", "reference.file", "t and value lists"),
+        ("v.yaml", "t: [0, 1]\nvalue: 5\n", "reference.file", "t and value lists"),
+    ],
+)  # fmt: skip
+def test_waypoint_files_read_whole_or_refused(tmp_path, name, text, field, allowed):
+    (tmp_path / name).write_text(text)
+    refused(*RUN, "--out", tmp_path / "o", "--reference", f"waypoints:file={tmp_path / name}",
+            field=field, allowed=allowed)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "name, text", [("c.csv", "# made by hand\nt,value\n0,0\n1,5,\n"), ("w.json", "[[0,0],[1,5]]")]
+)
+def test_waypoint_headers_after_comments_and_json_are_read(tmp_path, name, text):
+    (tmp_path / name).write_text(text)
+    rc, _, err = pneu(*RUN, "--out", tmp_path / "o", "--reference",
+                      f"waypoints:file={tmp_path / name}")  # fmt: skip
+    assert rc in (0, 3), err
+
+
+# ---------------------------------------------------------------------- tasks
+TASK_HEAD = "plumbing: bidirectional\nsegments:\n"
+
+
+@pytest.mark.parametrize(
+    "segment, field, allowed",
+    [
+        ("  - move: {to_mm: 10, duration_s: 1e-300}", "segments[0].move.duration_s",
+         "[0.001, inf) s: at least one control sample"),
+        ("  - spin: {speed_rpm: 60, duration_s: 1e-300}", "segments[0].spin.duration_s",
+         "at least one control sample"),
+        ("  - dwell: {duration_s: 1e-300}", "segments[0].dwell.duration_s", "[0.001, inf) s"),
+        ("  - move: {to_mm: 10, speed_mm_s: 1e9}", "segments[0].move.speed_mm_s",
+         "(0, 20000] mm/s"),
+        ("  - screw: {pitch_mm: 1, turns: 1e-300, rate_turns_s: 1}", "segments[0].screw.turns",
+         "ramp_s <= |turns|/rate_turns_s"),
+        ("  - dwell: {duration_s: 0.1}\n    load: {bogus: 1}", "segments[0].load.bogus",
+         "known: T_c, T_bk"),
+        ("  - dwell: {duration_s: 0.1}\n    load: {T_bk: 1e300}", "segments[0].load.T_bk",
+         "[0, 10] N*m"),
+        ("  - dwell: {duration_s: 0.1}\n    name: [1, 2]", "segments[0].name", "a string"),
+    ],
+)  # fmt: skip
+def test_a_task_segment_is_checked_whole_before_anything_is_written(
+    tmp_path, segment, field, allowed
+):
+    """Each of these was found only by the run (after run.mcap was begun: a bag left, the
+    line naming no segment), or not at all (a 1 GHz move aborted by the supervisor)."""
+    task = tmp_path / "task.yaml"
+    task.write_text(TASK_HEAD + segment + "\n")
+    refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
+    assert not (tmp_path / "o").exists()
+
+
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-q"]))
