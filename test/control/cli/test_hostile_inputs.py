@@ -341,5 +341,327 @@ def test_a_full_disk_mid_run_is_one_line_and_leaves_no_partial(tmp_path):
     assert not out.exists() or not [p for p in out.iterdir() if p.name.endswith(".partial")]
 
 
+# ------------------------------------------------- refused option combinations
+@pytest.fixture(scope="module")
+def short_bag(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("bag") / "run"
+    rc, _, err = pneu(*RUN[:-1], "0.3", "--out", out)
+    assert rc in (0, 3), err
+    return out / "run.mcap"
+
+
+@pytest.mark.parametrize(
+    "argv, field",
+    [
+        ([*RUN, "--duration", "600"], "--duration"),  # the last would silently win
+        ([*RUN, "--dur", "600"], "--duration"),  # an abbreviation is the same option
+        ([*RUN, "--overwrite", "--overwrite"], "--overwrite"),
+        (["identify", "b.mcap", "--out", "p.yaml", "--out", "q.yaml"], "--out"),
+    ],
+)
+def test_an_option_given_twice_is_refused(tmp_path, argv, field):
+    line = refused(*argv, "--out", tmp_path / "o", field=f"argument {field}",
+                   allowed="each option once")  # fmt: skip
+    assert "given twice" in line and not (tmp_path / "o").exists()
+
+
+def test_repeatable_options_still_repeat(tmp_path):
+    rc, _, err = pneu(*RUN, "--out", tmp_path / "o", "--set", "pid.kp=1",
+                      "--set", "pid.ki=0", "--fault", "noise_burst:start_s=0.01,duration_s=0.01",
+                      "--fault", "noise_burst:start_s=0.03,duration_s=0.01")  # fmt: skip
+    assert rc in (0, 3), err
+    doc = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert doc["config"]["controllers"]["linear"]["pid"]["kp"] == 1.0
+    assert len(doc["config"]["faults"]) == 2
+
+
+@pytest.mark.parametrize(
+    "extra, field, allowed",
+    [
+        (["--set", "pid.kp=1", "--set", "linear.pid.kp=2"], "--set linear.pid.kp",
+         "each key once per axis (already --set pid.kp=1"),
+        (["--set", "algorithm=ladrc"], "--set algorithm", "--controller sets algorithm"),
+        (["--reference", "constant:value=3", "--set", "reference.value=4"],
+         "--set reference.value", "--reference sets reference.value"),
+        (["--safety", "none.yaml", "--no-safety"], "--safety", "not with --no-safety"),
+    ],
+)  # fmt: skip
+def test_a_value_set_twice_is_refused(tmp_path, extra, field, allowed):
+    refused(*RUN, "--out", tmp_path / "o", *extra, field=field, allowed=allowed)
+    assert not (tmp_path / "o").exists()
+
+
+def test_replay_refuses_an_algorithm_set_twice(tmp_path, short_bag):
+    refused("replay", short_bag, "--out", tmp_path / "r.mcap", "--controller", "pid",
+            "--set", "algorithm=ladrc", field="--set algorithm",
+            allowed="--controller sets algorithm")  # fmt: skip
+    assert not (tmp_path / "r.mcap").exists()
+
+
+@pytest.mark.parametrize(
+    "extra, field, allowed",
+    [
+        (["--duration", "5"], "--duration", "only with --reference"),
+        (["--axis", "rotary"], "--axis", "only with --reference"),
+        (["--window-start", "1"], "--window-start", "only with --reference"),
+        (["--executor", "serial", "--workers", "2"], "--workers",
+         "(serial runs in this process)"),
+        (["--executor", "dask", "--address", "tcp://127.0.0.1:1", "--workers", "2"],
+         "--workers", "the cluster at --address has its own"),  # refused before any probe
+    ],
+)  # fmt: skip
+def test_sweep_options_that_would_be_ignored_are_refused(tmp_path, extra, field, allowed):
+    refused("sweep", "--out", tmp_path / "o", "--samples", "1", "--experiment",
+            "smooth_step_eq38", *extra, field=field, allowed=allowed)  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "extra", [["--executor", "serial"], ["--workers", "2"], ["--sampler", "sobol"]]
+)
+def test_paper_executor_options_only_with_a_band_stage(tmp_path, extra):
+    refused("paper", "--out", tmp_path / "o", "--only", "smooth_step_eq38", *extra,
+            field=extra[0], allowed="only with --uncertainty N")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "extra, field",
+    [
+        (["--hold", "linear=5", "--controller", "pid"], "--controller"),
+        (["--hold", "linear=5", "--reference", "constant:value=3"], "--reference"),
+        (["--axis", "both", "--hold", "linear=5,rotary=5", "--set", "pid.kp=1"], "--set"),
+    ],
+)
+def test_rig_refuses_controller_options_when_every_axis_is_held(tmp_path, extra, field):
+    refused("rig", "--backend", "sim", "--duration", "0.05", "--out", tmp_path / "o", *extra,
+            field=field, allowed="only for an axis a controller runs on")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_window_start_after_the_run_is_refused(short_bag):
+    refused("analyze", short_bag, "--window-start", "1e9", field="--window-start",
+            allowed="inside the run (its last sample is at 0.299 s)")  # fmt: skip
+    rc, out, err = pneu("analyze", short_bag, "--window-start", "0.2")
+    assert rc == 0 and "window 0.20–0.30 s" in out, err
+
+
+# ----------------------------------------------------------- numbers as typed
+@pytest.mark.parametrize(
+    "argv, field",
+    [
+        (["sim", "--duration", "0.05", "--no-plot", "--linear-voltage", "0_5"],
+         "--linear-voltage"),  # Python's float would read 5 V
+        ([*RUN, "--live", "8_765"], "--live"),
+        ([*RUN, "--live", "0", "--live-wait", "0_1"], "--live-wait"),  # 1 s, not 0.1 s
+    ],
+)  # fmt: skip
+def test_numbers_of_every_option_read_as_typed(tmp_path, argv, field):
+    refused(*argv, "--out", tmp_path / "o", field=f"argument {field}", allowed="not a number"
+            if field != "--live" else "not an integer")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------- recover, read-only
+def test_a_cut_bag_recovers_onto_its_own_final_name(tmp_path, short_bag):
+    """``pneu recover run.mcap.partial --out run.mcap`` (what a kill leaves, onto the name it
+    was to have): written as run.mcap.new.partial, the source kept byte for byte."""
+    from mcap_ros2.reader import read_ros2_messages
+
+    d = tmp_path / "killed"
+    d.mkdir()
+    cut = d / "run.mcap.partial"
+    data = short_bag.read_bytes()
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    rc, out, err = pneu("recover", cut, "--out", d / "run.mcap")
+    assert rc == 0, err
+    assert "recovered" in out and f"kept {cut}" in out
+    assert cut.read_bytes() == data[: len(data) * 2 // 3]
+    assert sorted(p.name for p in d.iterdir()) == ["run.mcap", "run.mcap.partial"]
+    n = sum(1 for _ in read_ros2_messages(str(d / "run.mcap")))  # complete, indexed
+    assert n > 0
+    refused("recover", cut, "--out", d / "run.mcap", field="--out", allowed="--overwrite")
+    rc, _, err = pneu("recover", cut, "--out", d / "run.mcap", "--overwrite")
+    assert rc == 0 and cut.exists(), err
+
+
+def test_a_partial_left_by_a_killed_command_is_named_first(tmp_path, short_bag):
+    stale = tmp_path / "r.mcap.partial"
+    stale.write_bytes(b"half a bag")
+    line = refused("recover", short_bag, "--out", tmp_path / "r.mcap", field="--out",
+                   allowed="r.mcap.partial is left by a command that did not finish")  # fmt: skip
+    assert "pneu recover it" in line and stale.read_bytes() == b"half a bag"
+    rc, _, err = pneu("recover", short_bag, "--out", tmp_path / "r.mcap", "--overwrite")
+    assert rc == 0 and not stale.exists() and (tmp_path / "r.mcap").exists(), err
+
+
+def test_a_read_only_file_system_is_named_as_such(tmp_path, monkeypatch):
+    """On a read-only file system access(W_OK) fails too (EROFS, even for root): the line
+    says read-only, not 'permission denied'."""
+    real = os.statvfs
+
+    class Ro:
+        def __init__(self, path):
+            st = real(path)
+            self.f_frsize, self.f_bavail, self.f_flag = st.f_frsize, st.f_bavail, os.ST_RDONLY
+
+    monkeypatch.setattr(os, "statvfs", Ro)
+    monkeypatch.setattr(os, "access", lambda *a, **k: False)
+    line = refused(*RUN, "--out", tmp_path / "o", field="--out",
+                   allowed="is on a read-only file system")  # fmt: skip
+    assert "permission denied" not in line
+
+
+def test_a_real_read_only_mount_is_named_as_such(tmp_path):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "none", str(ro)],
+                      capture_output=True).returncode != 0:  # fmt: skip
+        pytest.skip("cannot mount a read-only tmpfs here (not root)")
+    try:
+        for argv in ([*RUN, "--out", ro / "o"], ["tune", "--out", ro / "t.yaml"]):
+            refused(*argv, field="--out", allowed="is on a read-only file system")
+    finally:
+        subprocess.run(["umount", str(ro)], check=True)
+
+
+def test_numbas_note_on_record_subtypes_is_not_shown():
+    """Compiling the fast loop (a fresh clone, an empty numba cache) passes each
+    algorithm's state record where the base record is taken: by design; numba's ~2 kB
+    note on it is not a warning line for the user."""
+    from numba.core.errors import NumbaExperimentalFeatureWarning
+    from pneu_control.fastloop import loop  # importing it installs the filter
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.warn_explicit(
+            "Record(z1[type=float64;offset=0],k[type=int64;offset=8];16;False) has been "
+            "considered a subtype of Record(z1[type=float64;offset=0];8;False)  This is an "
+            "experimental feature.",
+            NumbaExperimentalFeatureWarning, loop.__file__, 130,
+        )  # fmt: skip
+        warnings.warn_explicit("another note", NumbaExperimentalFeatureWarning, loop.__file__, 1)
+    assert [str(w.message) for w in seen] == ["another note"]
+
+
+@pytest.mark.parametrize("value", ["-inf", "-1e3", "-.5e2"])
+def test_a_negative_number_is_a_value_not_an_option(tmp_path, value):
+    """argparse takes only -5 and -.5 for numbers: '--window-start -1e3' was "expected one
+    argument"; now the option's own range refuses it."""
+    refused(*RUN, "--out", tmp_path / "o", "--window-start", value, field="--window-start",
+            allowed="inside the run")  # fmt: skip
+
+
+# ---------------------------------------------------------------- config files
+@pytest.mark.parametrize(
+    "text, allowed",
+    [
+        ("watchdog_ms: 100\x00\n", ":1:17: control character 0x00; allowed: text"),
+        # nine aliases of nine aliases ...: 4e8 values from a few hundred bytes, at a key that
+        # exists (shown or walked, it never ended)
+        ("watchdog_ms: [" + "".join(f"&{c} [" for c in "abcdefghi") + "x" + "".join(
+            "]" + f", *{c}" * 8 for c in "abcdefghi"[::-1]) + "]\n",
+         "its aliases (*name) expand"),
+    ],
+)  # fmt: skip
+def test_a_config_file_with_control_characters_or_a_yaml_bomb_is_one_line(tmp_path, text, allowed):
+    bad = tmp_path / "safety.yaml"
+    bad.write_text(text)
+    refused(*RUN, "--out", tmp_path / "o", "--safety", bad, field="--safety", allowed=allowed)
+
+
+@pytest.mark.parametrize(
+    "reference, field, allowed",
+    [
+        ("constant:value=5,amplitude=3", "--reference constant", "a key of a constant reference"),
+        ("constant:value=5,t0_s=1", "--reference constant", "known: value"),
+        ("sine:amplitud=5", "--reference sine", "did you mean amplitude?"),
+        ("x:y=1", "--reference", "a kind: one of sine"),  # the kind, not its key
+    ],
+)
+def test_a_reference_key_its_kind_does_not_read_is_refused(tmp_path, reference, field, allowed):
+    refused(*RUN, "--out", tmp_path / "o", "--reference", reference, field=field, allowed=allowed)
+
+
+def test_a_set_reference_key_its_kind_does_not_read_is_refused(tmp_path):
+    refused(*RUN, "--out", tmp_path / "o", "--set", "reference.kind=constant", "--set",
+            "reference.amplitude=3", field="--set reference (constant)",
+            allowed="a key of a constant reference")  # fmt: skip
+
+
+# ----------------------------------------------------------------- waypoints
+def _reference_of(out: Path) -> list[float]:
+    import numpy as np
+
+    return list(np.load(out / "timeseries.npz")["linear.reference"][:2] * 1e3)
+
+
+def test_a_waypoint_file_with_a_bom_keeps_its_first_row(tmp_path):
+    wp = tmp_path / "w.csv"
+    wp.write_bytes(b"\xef\xbb\xbf" + b"0,0\n1,5\n2,5\n")  # Excel's UTF-8: a BOM first
+    rc, _, err = pneu(*RUN, "--out", tmp_path / "o", "--reference", f"waypoints:file={wp}")
+    assert rc in (0, 3), err
+    assert _reference_of(tmp_path / "o")[0] == pytest.approx(0.0, abs=1e-6)  # not 5: row kept
+
+
+@pytest.mark.parametrize(
+    "name, text, field, allowed",
+    [
+        ("three.csv", "0,0,7\n1,5,9\n", "reference.file[row 1]", "two columns t, value"),
+        ("extra.yaml", "t: [0, 1]\nvalue: [0, 5]\nextra: 1\n", "reference.file",
+         "(it has keys extra, t, value)"),
+        ("t.yaml", "t: 5\nvalue: 3\n", "reference.file", "t and value lists"),
+        ("v.yaml", "t: [0, 1]\nvalue: 5\n", "reference.file", "t and value lists"),
+    ],
+)  # fmt: skip
+def test_waypoint_files_read_whole_or_refused(tmp_path, name, text, field, allowed):
+    (tmp_path / name).write_text(text)
+    refused(*RUN, "--out", tmp_path / "o", "--reference", f"waypoints:file={tmp_path / name}",
+            field=field, allowed=allowed)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "name, text", [("c.csv", "# made by hand\nt,value\n0,0\n1,5,\n"), ("w.json", "[[0,0],[1,5]]")]
+)
+def test_waypoint_headers_after_comments_and_json_are_read(tmp_path, name, text):
+    (tmp_path / name).write_text(text)
+    rc, _, err = pneu(*RUN, "--out", tmp_path / "o", "--reference",
+                      f"waypoints:file={tmp_path / name}")  # fmt: skip
+    assert rc in (0, 3), err
+
+
+# ---------------------------------------------------------------------- tasks
+TASK_HEAD = "plumbing: bidirectional\nsegments:\n"
+
+
+@pytest.mark.parametrize(
+    "segment, field, allowed",
+    [
+        ("  - move: {to_mm: 10, duration_s: 1e-300}", "segments[0].move.duration_s",
+         "[0.001, inf) s: at least one control sample"),
+        ("  - spin: {speed_rpm: 60, duration_s: 1e-300}", "segments[0].spin.duration_s",
+         "at least one control sample"),
+        ("  - dwell: {duration_s: 1e-300}", "segments[0].dwell.duration_s", "[0.001, inf) s"),
+        ("  - move: {to_mm: 10, speed_mm_s: 1e9}", "segments[0].move.speed_mm_s",
+         "(0, 20000] mm/s"),
+        ("  - screw: {pitch_mm: 1, turns: 1e-300, rate_turns_s: 1}", "segments[0].screw.turns",
+         "ramp_s <= |turns|/rate_turns_s"),
+        ("  - dwell: {duration_s: 0.1}\n    load: {bogus: 1}", "segments[0].load.bogus",
+         "known: T_c, T_bk"),
+        ("  - dwell: {duration_s: 0.1}\n    load: {T_bk: 1e300}", "segments[0].load.T_bk",
+         "[0, 10] N*m"),
+        ("  - dwell: {duration_s: 0.1}\n    name: [1, 2]", "segments[0].name", "a string"),
+    ],
+)  # fmt: skip
+def test_a_task_segment_is_checked_whole_before_anything_is_written(
+    tmp_path, segment, field, allowed
+):
+    """Each of these was found only by the run (after run.mcap was begun: a bag left, the
+    line naming no segment), or not at all (a 1 GHz move aborted by the supervisor)."""
+    task = tmp_path / "task.yaml"
+    task.write_text(TASK_HEAD + segment + "\n")
+    refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
+    assert not (tmp_path / "o").exists()
+
+
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-q"]))

@@ -51,7 +51,7 @@ def test_a_run_directory_is_never_reused_silently(done, tmp_path, capsys):
     refused(capsys, ["run", *SHORT, "--out", str(out)], "--out", "--overwrite", "run.mcap")
     # bad input into an existing run: refused before anything is touched
     refused(capsys, ["run", *SHORT, "--seed", "-1", "--out", str(out), "--overwrite"], "--seed")
-    refused(capsys, ["run", *SHORT[:-2], "--duration", "0.001", "--out", str(out)], "--out")
+    refused(capsys, ["run", *SHORT[:4], "--duration", "0.001", "--out", str(out)], "--out")
     assert snapshot(out) == before
     # --overwrite with --no-bag: the old bag goes too (analyze would report the wrong run)
     assert main(["run", *SHORT, "--seed", "4", "--no-bag", "--out", str(out), "--overwrite"]) == 0

@@ -46,6 +46,13 @@ def run(args: argparse.Namespace) -> int:
         None if args.window_start is None else WindowSpec(kind="fixed", t_start_s=args.window_start)
     )
     res = analyze(args.run, window=window, include_faults=args.include_faults)
+    ends = [float(tr.t[-1]) for tr in res.traces.values() if len(tr.t)]
+    if args.window_start is not None and ends and args.window_start > max(ends):
+        raise ParamError(  # a window after the last sample measures nothing
+            "--window-start",
+            args.window_start,
+            f"[0, {max(ends):g}] s: inside the run (its last sample is at {max(ends):g} s)",
+        )
     if args.json:
         print(json.dumps(res.to_dict(), indent=2, sort_keys=True, default=_json_safe))
         return 0

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import signal
 import sys
 import warnings
@@ -49,24 +50,23 @@ class UserError(Exception):
     """An error the user can fix; printed as one line (exit 2)."""
 
 
-_INF_NAN = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity", "nan"}
+_NEGATIVE = re.compile(
+    r"^-(?:[0-9][0-9_:]*\.?[0-9_]*|\.[0-9][0-9_]*)(?:e[-+]?[0-9]+)?$"
+    r"|^-(?:inf|infinity|nan|\.inf|0x[0-9a-f]+|0o[0-7]+)$",
+    re.IGNORECASE,
+)
+_REPEATABLE = (argparse._AppendAction, argparse._CountAction, argparse._ExtendAction)
 
 
 def _number_as_typed(text: str, want: type) -> float | int:
     """A number as the config files read it (``010`` 10, ``0x10`` 16, ``3e5``); ``1_000`` and
     ``1:00`` are not numbers (Python's ``float`` would read 1000; YAML 1.1 60)."""
-    from pneu_msgs_py.params.yaml_file import read_scalar
+    from pneu_msgs_py.params.spec import parse_number
 
-    if want is float and text.strip().lower() in _INF_NAN:
-        return float(text)  # refused by the option's own range, or meant (--horizon inf)
-    v = read_scalar(text)
-    ok = (int,) if want is int else (int, float)
-    if isinstance(v, bool) or not isinstance(v, ok):
-        what = "an integer" if want is int else "a number"
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not {what} (read as typed: 1_000 and 1:00 are not numbers)"
-        )
-    return want(v)
+    try:
+        return parse_number(text, want)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -75,8 +75,15 @@ class _Parser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
+        # a value that reads as a negative number is a value, not an option: argparse's own
+        # rule takes only -5 and -.5 ('--duration -inf' or '-1e3': "expected one argument")
+        self._negative_number_matcher = _NEGATIVE
         self.register("type", float, lambda t: _number_as_typed(t, float))
         self.register("type", int, lambda t: _number_as_typed(t, int))
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._given: dict[str, str] = {}  # dest -> the option that set it (each once)
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> NoReturn:
         self.exit(
@@ -92,6 +99,18 @@ class _Parser(argparse.ArgumentParser):
             if isinstance(text, str) and not text.strip():
                 name = "/".join(action.option_strings) or action.metavar or action.dest
                 self.error(f"argument {name}: {text!r} refused; allowed: a value that is not empty")
+        if own and action.option_strings and not isinstance(action, _REPEATABLE):
+            # given twice, the last would silently win (--duration 1 ... --duration 600)
+            given = self.__dict__.setdefault("_given", {})
+            values = " ".join(map(repr, arg_strings)) if isinstance(arg_strings, list) else ""
+            if action.dest in given:
+                name = "/".join(action.option_strings)
+                twice = f" ({given[action.dest]}, then {values})" if values else ""
+                self.error(
+                    f"argument {name}: given twice{twice}; allowed: each option once "
+                    "(only the options that say so repeat, e.g. --set)"
+                )
+            given[action.dest] = values
         return super()._get_values(action, arg_strings)
 
 

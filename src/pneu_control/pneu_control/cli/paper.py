@@ -123,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     if args.uncertainty:  # sample s runs with seed + s
         session.check_seed(args.seed + args.uncertainty - 1, "--seed + --uncertainty - 1")
 
-    check_executor_args(args)
+    check_executor_args(args, runs="" if args.uncertainty else "--uncertainty N")
     experiments = [experiment_by_id(i) for i in args.only] or list(PAPER_EXPERIMENTS)
     cfg = Path(args.config_dir) if args.config_dir else config_dir()
     if not cfg.is_dir():

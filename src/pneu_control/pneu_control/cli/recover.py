@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from pneu_msgs_py.bag.recover import recover
-from pneu_msgs_py.lifecycle.outputs import OutputFile
+from pneu_msgs_py.lifecycle.outputs import PARTIAL, OutputFile, is_same_path
 
 NAME = "recover"
 HELP = (
@@ -25,8 +25,10 @@ def run(args: argparse.Namespace) -> int:
     """``pneu recover``: write the recovered bag; the exit code."""
     claim = OutputFile(args.out, overwrite=args.overwrite, inputs=[args.bag]).check()
     with claim:
-        rep = recover(args.bag, claim.path)
+        rep = recover(args.bag, claim.path, partial=claim.partial)
     for w in rep.warnings:
         print(f"warning: {w}")
     print(rep.line())
+    if is_same_path(args.bag, claim.path.with_name(claim.path.name + PARTIAL)):
+        print(f"kept {args.bag} (the source): remove it once {claim.path} reads as it should")
     return 0

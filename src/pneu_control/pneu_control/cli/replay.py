@@ -44,13 +44,13 @@ def run(args: argparse.Namespace) -> int:
     axes = None
     if args.axis:
         axes = ["linear", "rotary"] if args.axis == "both" else [args.axis]
-    sets = list(args.set)
     if args.controller is not None and args.controller not in ALGORITHMS:
         raise ParamError("--controller", args.controller, "one of " + ", ".join(ALGORITHMS))
-    if args.controller:
-        sets.insert(0, f"algorithm={args.controller}")
     probe_axes = tuple(axes or ("linear", "rotary"))
-    overrides = parse_sets(sets, probe_axes)
+    taken = {"algorithm": "--controller"} if args.controller else {}
+    overrides = parse_sets(args.set, probe_axes, taken)
+    for axis in overrides if args.controller else ():
+        overrides[axis] = {"algorithm": args.controller, **overrides[axis]}
     claim = OutputFile(
         args.out, overwrite=args.overwrite, inputs=[args.run], suffixes=(".mcap",)
     ).check()

@@ -8,6 +8,7 @@ import sys
 
 from pneu_msgs_py.lifecycle import exits, signals
 from pneu_msgs_py.lifecycle.duration import MAX_DURATION_S, check_duration
+from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.experiment import session
@@ -65,7 +66,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def parse_hold(text: str) -> dict[str, float]:
     """``linear=5.05,rotary=5`` -> ``{"linear": 5.05, "rotary": 5.0}`` (0-10 V, each axis once)."""
     from pneu_msgs_py.contract.samples import AXES, U_MAX_V, U_MIN_V
-    from pneu_msgs_py.params.core import ParamError
     from pneu_msgs_py.params.spec import parse_spec
 
     if not text:
@@ -96,13 +96,24 @@ def run(args: argparse.Namespace) -> int:
     duration_s = MAX_DURATION_S if until_stopped else check_duration(args.duration)
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
     hold = parse_hold(args.hold)
+    active = tuple(a for a in axes if a not in hold)
+    if not active:  # no controller runs: its options would be silently ignored
+        for option, value in (("--controller", args.controller), ("--reference", args.reference),
+                              ("--set", args.set), ("--controllers", args.controllers)):  # fmt: skip
+            if value:
+                raise ParamError(
+                    option,
+                    value[0] if isinstance(value, list) else value,
+                    f"only for an axis a controller runs on (--hold holds every axis of "
+                    f"--axis {args.axis})",
+                )
     claim = None
     if args.out is not None:
         claim = rig_dir(
             args.out, overwrite=args.overwrite, inputs=(args.controllers, args.rig, args.safety)
         ).check()
     spec = session.build_spec(
-        axes=tuple(a for a in axes if a not in hold) or axes,
+        axes=active or axes,
         controller=args.controller,
         reference=args.reference,
         sets=args.set,

@@ -27,13 +27,18 @@ def add_executor_arguments(p: argparse.ArgumentParser) -> None:
     """Where the runs execute (shared with ``pneu paper --uncertainty``)."""
     p.add_argument(
         "--executor",
-        choices=("local", "serial", "dask"),
-        default="local",
+        choices=EXECUTORS,
+        default=None,
         help="local: one process per core (default); serial: this process; "
         "dask: a Dask cluster (--address) or a local one",
     )
     p.add_argument(
-        "--workers", type=int, default=None, metavar="N", help="processes (default: the cores)"
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="processes started, with --executor local or a local Dask cluster (default: the "
+        "cores)",
     )
     p.add_argument(
         "--address",
@@ -41,7 +46,13 @@ def add_executor_arguments(p: argparse.ArgumentParser) -> None:
         metavar="tcp://HOST:8786",
         help="Dask scheduler to run on (with --executor dask)",
     )
-    p.add_argument("--sampler", choices=("lhs", "sobol"), default="lhs")
+    p.add_argument(
+        "--sampler", choices=SAMPLERS, default=None, help="plant-sample design (default: lhs)"
+    )
+
+
+EXECUTORS = ("local", "serial", "dask")
+SAMPLERS = ("lhs", "sobol")
 
 
 MAX_SAMPLES = 10_000  # plant samples: bounded resources (the rows and envelopes stay in memory)
@@ -86,15 +97,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="KIND[:key=value,...]",
         help="instead, one pneu run experiment with this reference (with --axis, --duration)",
     )
-    p.add_argument("--axis", choices=("linear", "rotary"), default="linear")
+    p.add_argument(
+        "--axis",
+        choices=("linear", "rotary"),
+        default=None,
+        help="with --reference (default linear)",
+    )
     p.add_argument(
         "--duration",
         type=float,
-        default=20.0,
+        default=None,
         metavar="S",
-        help="with --reference: simulated seconds per run, [0.01, 600] (the duration cap)",
+        help="with --reference: simulated seconds per run, [0.01, 600] (the duration cap; "
+        "default 20)",
     )
-    p.add_argument("--window-start", type=float, default=None, metavar="S")
+    p.add_argument(
+        "--window-start",
+        type=float,
+        default=None,
+        metavar="S",
+        help="with --reference: the steady-state window's start, inside the run",
+    )
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument(
         "--controller",
@@ -172,13 +195,36 @@ def check_address(address: str, field: str = "--address") -> tuple[str, int]:
     return host, port
 
 
-def check_executor_args(args: argparse.Namespace) -> None:
-    """Refuse ``--address`` without the dask executor, or where no scheduler answers, and
-    ``--workers`` out of range."""
+def check_executor_args(args: argparse.Namespace, runs: str = "") -> None:
+    """Refuse an executor option that would be ignored (``runs``, when not empty: the option
+    without which nothing runs on an executor, e.g. ``--uncertainty N``; ``--address`` without
+    the dask executor; ``--workers`` where no workers are started), ``--workers`` out of
+    range and an ``--address`` where no scheduler answers; then fill in the defaults
+    (``local``, ``lhs``)."""
+    options = {"--address": args.address, "--workers": args.workers,
+               "--sampler": args.sampler, "--executor": args.executor}  # fmt: skip
+    given = [(o, v) for o, v in options.items() if v is not None]
+    if runs and given:
+        raise ParamError(given[0][0], given[0][1], f"only with {runs} (nothing runs without it)")
+    args.executor = args.executor or EXECUTORS[0]
+    args.sampler = args.sampler or SAMPLERS[0]
     if args.address is not None and args.executor != "dask":
         raise ParamError("--address", args.address, "with --executor dask")
-    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
-        raise ParamError("--workers", args.workers, f"an integer in [1, {MAX_WORKERS}]")
+    if args.workers is not None:
+        if args.executor == "serial" or args.address is not None:
+            where = (
+                "serial runs in this process"
+                if args.executor == "serial"
+                else ("the cluster at --address has its own")
+            )
+            raise ParamError(
+                "--workers",
+                args.workers,
+                f"only where workers are started: --executor local, or dask without --address "
+                f"({where})",
+            )
+        if not 1 <= args.workers <= MAX_WORKERS:
+            raise ParamError("--workers", args.workers, f"an integer in [1, {MAX_WORKERS}]")
     if args.address is not None:
         check_address(args.address)
 
@@ -194,12 +240,17 @@ def run(args: argparse.Namespace) -> int:
         raise ParamError("--samples", args.samples, f"an integer in [1, {MAX_SAMPLES}]")
     session.check_seed(args.seed)
     session.check_seed(args.seed + args.samples - 1, "--seed + --samples - 1")
-    check_duration(args.duration)
-    check_executor_args(args)
     if args.reference and args.experiment:
         raise ParamError("--reference", args.reference, "one or the other of it and --experiment")
-    if args.window_start is not None and not args.reference:
-        raise ParamError("--window-start", args.window_start, "only with --reference")
+    for option in ("--axis", "--duration", "--window-start"):  # of the one --reference run
+        value = getattr(args, option[2:].replace("-", "_"))
+        if value is not None and not args.reference:
+            raise ParamError(
+                option, value, "only with --reference (the paper's experiments fix their own)"
+            )
+    args.axis = args.axis or "linear"
+    args.duration = check_duration(args.duration if args.duration is not None else 20.0)
+    check_executor_args(args)
     if args.config_dir and not Path(args.config_dir).is_dir():
         raise ParamError("--config-dir", args.config_dir, "a directory holding controllers*.yaml")
     cfg = Path(args.config_dir) if args.config_dir else None

@@ -49,6 +49,7 @@ __all__ = [
     "ALGORITHMS",
     "ANGLE_ONLY_ALGORITHMS",
     "AXIS_ALGORITHMS",
+    "REFERENCE_KEYS",
     "REFERENCE_KINDS",
     "TdParams",
     "LimitsParams",
@@ -64,6 +65,15 @@ ALGORITHMS = ("pid", "ladrc", "eso_smc", "eso_smc_plus", "coast")
 ANGLE_ONLY_ALGORITHMS = ("coast",)
 AXIS_ALGORITHMS = tuple(a for a in ALGORITHMS if a not in ANGLE_ONLY_ALGORITHMS)
 REFERENCE_KINDS = ("sine", "smooth_step", "constant", "ramp", "waypoints")
+# the ReferenceParams fields each kind reads (references.make_reference): a key of another
+# kind given with it would be silently ignored (constant:value=5,amplitude=3)
+REFERENCE_KEYS = {
+    "sine": ("amplitude", "frequency_hz", "offset", "t0_s"),
+    "smooth_step": ("offset", "target", "duration_s", "t0_s"),
+    "constant": ("value",),
+    "ramp": ("offset", "slope", "duration_s", "t0_s"),
+    "waypoints": ("file", "t0_s"),
+}
 
 _POS = {"lo": 0.0, "lo_open": True}  # strictly positive
 _NONNEG = {"lo": 0.0}

@@ -314,44 +314,54 @@ def load_waypoints(
     if not path.is_file():
         raise ParamError(key, file, "an existing CSV or YAML waypoint file")
     rows: list[tuple[object, object]] = []
-    if path.suffix.lower() in (".yaml", ".yml"):
+    if path.suffix.lower() in (".yaml", ".yml", ".json"):  # JSON is YAML (1.2)
         from pneu_msgs_py.params.yaml_file import load_yaml
 
+        shapes = "a YAML list of [t, value], {points: [...]} or {t: [...], value: [...]}"
         data = load_yaml(path)
-        if isinstance(data, dict) and "points" in data:
-            data = data["points"]
-        if isinstance(data, dict) and "t" in data and "value" in data:
-            rows = list(zip(data["t"], data["value"]))
-            if len(data["t"]) != len(data["value"]):
+        if isinstance(data, dict):
+            keys = sorted(map(str, data))
+            if keys not in (["points"], ["t", "value"]):  # another key would be ignored
+                raise ParamError(key, file, f"{shapes} (it has keys {', '.join(keys)})")
+            if "points" in data:
+                data = data["points"]
+            elif not all(isinstance(data[k], list) for k in ("t", "value")):
+                raise ParamError(key, file, f"{shapes}: t and value lists")
+            elif len(data["t"]) != len(data["value"]):
                 raise ParamError(key, file, "t and value lists of equal length")
-        elif isinstance(data, list):
+            else:
+                rows = list(zip(data["t"], data["value"]))
+        if isinstance(data, list):
             for i, row in enumerate(data):
                 if not isinstance(row, (list, tuple)) or len(row) != 2:
                     raise ParamError(f"{key}[{i}]", row, "a [t, value] pair")
                 rows.append((row[0], row[1]))
-        else:
-            raise ParamError(
-                key, file, "YAML list of [t, value], {points: ...} or {t: [...], value: [...]}"
-            )
+        elif not rows:
+            raise ParamError(key, file, shapes)
     else:
         from pneu_msgs_py.params.inputs import UnreadableInput, read_input
 
         try:
             raw = read_input(path)  # a regular file of bounded size, remembered as an input
-            text = raw.decode("utf-8")
+            text = raw.decode("utf-8-sig")  # a BOM is not part of the first cell
         except UnreadableInput as err:
             raise ParamError(
                 key, file, f"a readable CSV or YAML waypoint file ({err.problem})"
             ) from None
         except UnicodeDecodeError as err:
             raise ParamError(key, file, f"a UTF-8 CSV file (byte {err.start} is not)") from None
+        header = True  # the first row that is not a comment may name the columns
         for i, row in enumerate(csv.reader(io.StringIO(text, newline=""))):
-            cells = [c.strip() for c in row if c.strip() != ""]
+            cells = [c.strip() for c in row]
+            while cells and not cells[-1]:  # a trailing separator (0,5,) adds no column
+                cells.pop()
             if not cells or cells[0].startswith("#"):
                 continue
-            if i == 0 and not _is_number(cells[0]):
-                continue  # header
-            if len(cells) < 2:
+            if header and not _is_number(cells[0]):
+                header = False
+                continue
+            header = False
+            if len(cells) != 2 or not all(cells):
                 raise ParamError(f"{key}[row {i + 1}]", row, "two columns t, value")
             rows.append((cells[0], cells[1]))
     t: list[float] = []

@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,7 +18,7 @@ from pneu_msgs_py.lifecycle import signals
 from pneu_msgs_py.lifecycle.duration import check_duration
 from pneu_msgs_py.lifecycle.outputs import OutputDir
 from pneu_msgs_py.live.sink import Tee
-from pneu_msgs_py.params.core import ParamError, to_dict
+from pneu_msgs_py.params.core import ParamError, to_dict, unknown_key
 from pneu_msgs_py.params.spec import parse_spec, parse_value
 from pneu_msgs_py.params.yaml_file import from_option
 
@@ -49,9 +49,17 @@ def check_seed(seed: object, field: str = "--seed") -> int:
     return seed
 
 
-def parse_sets(items: Iterable[str], axes: tuple[str, ...]) -> dict[str, dict[str, Any]]:
-    """``["eso_smc.epsilon=900", "rotary.pid.kp=0.3"]`` -> per-axis dotted overrides."""
+def parse_sets(
+    items: Iterable[str], axes: tuple[str, ...], taken: Mapping[str, str] | None = None
+) -> dict[str, dict[str, Any]]:
+    """``["eso_smc.epsilon=900", "rotary.pid.kp=0.3"]`` -> per-axis dotted overrides.
+
+    Each key once per axis (``eso_smc.epsilon`` and ``linear.eso_smc.epsilon`` are the same
+    key), and none that another option sets (``taken``: key -> that option, e.g.
+    ``algorithm`` -> ``--controller``): the last would silently win.
+    """
     out: dict[str, dict[str, Any]] = {axis: {} for axis in axes}
+    first: dict[tuple[str, str], str] = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key:
@@ -65,6 +73,19 @@ def parse_sets(items: Iterable[str], axes: tuple[str, ...]) -> dict[str, dict[st
                 )
             targets, key = (head,), rest
         for axis in targets:
+            if (taken or {}).get(key):
+                raise ParamError(
+                    f"--set {item.partition('=')[0]}",
+                    value,
+                    f"a key no other option sets ({taken[key]} sets {key})",
+                )
+            if (axis, key) in first:
+                raise ParamError(
+                    f"--set {item.partition('=')[0]}",
+                    value,
+                    f"each key once per axis (already --set {first[axis, key]} for {axis})",
+                )
+            first[axis, key] = item
             out[axis][key] = parse_value(value)
     return out
 
@@ -74,7 +95,26 @@ def parse_reference(text: str | None) -> dict[str, Any]:
     if not text:
         return {}
     kind, values = parse_spec(text, "--reference")
+    check_reference_keys(kind, values, f"--reference {kind}")
     return {"reference.kind": kind, **{f"reference.{k}": v for k, v in values.items()}}
+
+
+def check_reference_keys(kind: str, keys: Iterable[str], field: str) -> None:
+    """Refuse an unknown reference kind, and a key the kind does not read (it would be
+    silently ignored: ``constant:value=5,amplitude=3``)."""
+    from pneu_control.controller.params import REFERENCE_KEYS
+
+    if kind not in REFERENCE_KEYS:
+        raise ParamError("--reference", kind, "a kind: one of " + ", ".join(REFERENCE_KEYS))
+    for key in keys:
+        if key not in REFERENCE_KEYS[kind]:
+            raise ParamError(
+                f"{field}",
+                key,
+                unknown_key(key, REFERENCE_KEYS[kind]).replace(
+                    "no such parameter", f"a key of a {kind} reference"
+                ),
+            )
 
 
 def rotary_average_s(speed_rpm: float) -> float:
@@ -178,6 +218,8 @@ def _check_options(o: RunOptions) -> float:
     if o.controller is not None and o.controller not in ALGORITHMS:
         raise ParamError("--controller", o.controller, "one of " + ", ".join(ALGORITHMS))
     check_seed(o.seed)
+    if o.safety is False and o.safety_file is not None:  # no supervisor would read it
+        raise ParamError("--safety", str(o.safety_file), "not with --no-safety (one or the other)")
     w = o.window_start_s
     if w is not None and not (isinstance(w, (int, float)) and 0.0 <= w < duration_s):
         raise ParamError("--window-start", w, f"[0, {duration_s:g}) s: inside the run")
@@ -186,8 +228,10 @@ def _check_options(o: RunOptions) -> float:
 
 def _controllers(o: RunOptions) -> tuple[dict[str, Any], dict[str, WindowSpec]]:
     """Each axis's controller parameters (file, then reference, algorithm and --set) and window."""
-    per_axis = parse_sets(o.sets, o.axes)
     ref = o.reference if isinstance(o.reference, dict) else parse_reference(o.reference)
+    by = "--reference" if isinstance(o.reference, str) else "the experiment's reference"
+    taken = dict.fromkeys(ref, by) | ({"algorithm": "--controller"} if o.controller else {})
+    per_axis = parse_sets(o.sets, o.axes, taken)
     controllers: dict[str, Any] = {}
     windows: dict[str, WindowSpec] = {}
     for axis in o.axes:
@@ -201,6 +245,9 @@ def _controllers(o: RunOptions) -> tuple[dict[str, Any], dict[str, WindowSpec]]:
             params = load_controller_params(axis, o.controllers_file, overrides)
         except ParamError as err:  # an override's: named with its axis
             raise ParamError(f"{axis}.{err.key}", err.value, err.allowed) from None
+        kind = params.reference.kind  # a --set reference.KEY the kind reads, too
+        sets = [k.partition(".")[2] for k in per_axis[axis] if k.startswith("reference.")]
+        check_reference_keys(kind, [k for k in sets if k != "kind"], f"--set reference ({kind})")
         controllers[axis] = params
         windows[axis] = window_for(axis, params.reference, o.window_start_s)
     return controllers, windows

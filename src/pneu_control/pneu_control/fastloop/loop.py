@@ -18,10 +18,12 @@ from __future__ import annotations
 
 import hashlib
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
 from numba import njit
+from numba.core.errors import NumbaExperimentalFeatureWarning
 from pneu_msgs_py.params import records
 from pneu_sim.physics import kernel as plant_kernel
 from pneu_sim.physics.kernel import step_period
@@ -48,6 +50,12 @@ from pneu_control.fastloop.supervisor import (
     sup_outputs,
 )
 from pneu_driver import safety
+
+# each algorithm's state record extends the base one and is passed where the base is taken
+# (axis_update): by design, so numba's note on compiling it (one ~2 kB line) is not shown
+warnings.filterwarnings(
+    "ignore", r"(?s)Record\(.*has been considered a subtype", NumbaExperimentalFeatureWarning
+)
 
 __all__ = ["closed_loop", "refresh_cache"]
 

@@ -7,7 +7,7 @@ A task file (YAML, read by the one strict reader :mod:`pneu_msgs_py.params.yaml_
     plumbing: bidirectional          # the twin's rotary plumbing (paper | bidirectional); optional
     controllers:                     # dotted overrides of config/controllers.yaml, per axis
       rotary: {algorithm: ladrc}
-    loads: {rotary.load.T_breakaway: 0.05}   # the twin's loads at the start (dotted plant fields)
+    loads: {T_bk: 0.05}              # the twin's loads at the start (load.* fields of plant.yaml)
     limits: {angle_min_deg: -720, angle_max_deg: 720}   # optional: the angles the tool tolerates
     segments:
       - move: {to_mm: 40, speed_mm_s: 40}
@@ -20,7 +20,7 @@ A task file (YAML, read by the one strict reader :mod:`pneu_msgs_py.params.yaml_
       - dwell: {duration_s: 0.5}
       - wait: {}
         until: {pressure: {sensor: p_c1, above_kpa: 400}}
-        load: {rotary.load.T_breakaway: 0.0}   # loads changed when the segment starts
+        load: {T_bk: 0.0}            # loads changed when the segment starts
 
 Segments (targets chain: a segment starts where the previous one's reference ended):
 
@@ -89,6 +89,9 @@ DEFAULT_TOL_MM = 0.5
 DEFAULT_TOL_DEG = 1.0
 DEFAULT_FOR_S = 0.05
 TIMEOUT_MARGIN_S = 2.0
+# one control sample (the controllers' sample_time_s, the paper's T = 1 ms): a motion that
+# takes less is a step between two samples, which no trajectory can carry
+MIN_MOTION_S = 0.001
 
 
 @dataclass(frozen=True)
@@ -165,6 +168,9 @@ def parse_task(
     if not isinstance(data, Mapping):
         raise ParamError("task", type(data).__name__, "a mapping with a 'segments:' list")
     _no_unknown("task", data, _TASK_KEYS)
+    for key in ("name", "description"):
+        if not isinstance(data.get(key, ""), str):
+            raise ParamError(key, data[key], "a text (a string)")
     name = str(data.get("name", Path(source).stem if source else "task"))
     plumbing = data.get("plumbing")
     if plumbing is not None and plumbing not in ("paper", "bidirectional"):
@@ -188,8 +194,14 @@ def parse_task(
     one_way = (plumbing or plant_plumbing) == "paper"  # the motor drives one way
     x, th = x0_m, theta0_rad
     out = []
+    from pneu_control.task.plan import segment_trajectory
+
     for i, raw in enumerate(segs):
         seg = _segment(i, raw, x, th, safety, soft, one_way)
+        try:  # the trajectory the segment becomes: whatever it refuses, refused here
+            segment_trajectory(seg, 0.0)
+        except ParamError as err:
+            raise ParamError(f"{seg.label}.{seg.kind}: {err.key}", err.value, err.allowed) from None
         out.append(seg)
         x, th = seg.x_end, seg.theta_end
     return TaskProgram(
@@ -276,7 +288,9 @@ def _segment(i: int, raw: Any, x: float, th: float, safety, limits, one_way: boo
         raise ParamError(where, sorted(raw), f"exactly one of {', '.join(KINDS)}")
     kind = kinds[0]
     _no_unknown(where, {k: v for k, v in raw.items() if k != kind}, _SEGMENT_KEYS)
-    name = str(raw.get("name", ""))
+    name = raw.get("name", "")
+    if not isinstance(name, str):
+        raise ParamError(f"{where}.name", name, "a text (a string)")
     args = _mapping(f"{where}.{kind}", raw[kind])
     _no_unknown(f"{where}.{kind}", args, _MOTION_FIELDS[kind])
     at = f"{where}.{kind}"
@@ -360,11 +374,29 @@ def _duration(at: str, args: dict, delta: float, speed_key: str, per_s: float) -
     if "duration_s" in args and speed_key in args:
         raise ParamError(at, sorted(args), f"one of {speed_key}, duration_s")
     if "duration_s" in args:
-        return _number(f"{at}.duration_s", args["duration_s"], "s", positive=True)
+        return _motion_s(f"{at}.duration_s", args["duration_s"])
     if speed_key not in args:
         raise ParamError(at, sorted(args), f"{speed_key} or duration_s")
-    v = _number(f"{at}.{speed_key}", args[speed_key], speed_key.split("_", 1)[1], positive=True)
-    return 2.0 * abs(delta) / (v * per_s) if delta != 0.0 else 0.0
+    unit = speed_key.split("_", 1)[1].replace("_", "/")
+    v = _number(f"{at}.{speed_key}", args[speed_key], unit, positive=True)
+    dur = 2.0 * abs(delta) / (v * per_s) if delta != 0.0 else 0.0
+    if 0.0 < dur < MIN_MOTION_S:
+        fastest = 2.0 * abs(delta) / (MIN_MOTION_S * per_s)
+        raise ParamError(
+            f"{at}.{speed_key}",
+            v,
+            f"(0, {fastest:.6g}] {unit}: the motion over at least one control sample "
+            f"({MIN_MOTION_S * 1e3:g} ms)",
+        )
+    return dur
+
+
+def _motion_s(key: str, v: Any) -> float:
+    """A duration of a motion: at least one control sample (:data:`MIN_MOTION_S`)."""
+    d = _number(key, v, "s", positive=True)
+    if d < MIN_MOTION_S:
+        raise ParamError(key, d, f"[{MIN_MOTION_S:g}, inf) s: at least one control sample")
+    return d
 
 
 def _plan(kind, args, at, x, th, safety, one_way) -> tuple[float, float, float]:
@@ -403,7 +435,7 @@ def _plan(kind, args, at, x, th, safety, one_way) -> tuple[float, float, float]:
         rpm = _number(f"{at}.speed_rpm", args["speed_rpm"], "rpm", nonzero=True)
         _forward(f"{at}.speed_rpm", rpm, one_way, "rpm")
         _check_rpm(f"{at}.speed_rpm", rpm, safety)
-        dur = _number(f"{at}.duration_s", args["duration_s"], "s", positive=True)
+        dur = _motion_s(f"{at}.duration_s", args["duration_s"])
         cruise = dur - min(SPIN_RAMP_S, dur / 3.0)  # the ramps in and out (task/plan.py)
         return x, th + rpm * DEG_S_PER_RPM * cruise / DEG_PER_RAD, dur
     if kind == "screw":
@@ -416,13 +448,20 @@ def _plan(kind, args, at, x, th, safety, one_way) -> tuple[float, float, float]:
         turns = _number(f"{at}.turns", args["turns"], "turns", nonzero=True)
         _forward(f"{at}.turns", turns, one_way, "turns")
         rate = _number(f"{at}.rate_turns_s", args["rate_turns_s"], "turns/s", positive=True)
-        ramp = _number(f"{at}.ramp_s", args.get("ramp_s", 0.25), "s", positive=True)
+        ramp = _motion_s(f"{at}.ramp_s", args.get("ramp_s", 0.25))
         _check_rpm(f"{at}.rate_turns_s", rate * 60.0, safety)
+        if ramp > abs(turns) / rate:  # the rate is reached and left within the turns
+            raise ParamError(
+                f"{at}.ramp_s" if "ramp_s" in args else f"{at}.turns",
+                ramp if "ramp_s" in args else turns,
+                f"ramp_s <= |turns|/rate_turns_s ({abs(turns) / rate:.6g} s; ramp_s "
+                f"{ramp:g} s{'' if 'ramp_s' in args else ', the default'})",
+            )
         return x + pitch * turns, th + 2.0 * math.pi * turns, abs(turns) / rate + ramp
     if kind == "dwell":
         if "duration_s" not in args:
             raise ParamError(at, sorted(args), "duration_s")
-        return x, th, _number(f"{at}.duration_s", args["duration_s"], "s", positive=True)
+        return x, th, _motion_s(f"{at}.duration_s", args["duration_s"])
     return x, th, 0.0  # wait
 
 

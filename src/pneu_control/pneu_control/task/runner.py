@@ -218,7 +218,8 @@ class TaskDriver:
 
 
 def _load_kwargs(load: dict[str, Any]) -> dict[str, Any]:
-    """Dotted load names (``rotary.load.T_breakaway``) as the plant's set_load keywords."""
+    """Load names (``T_bk`` or ``load.T_bk``, checked by the task session) as the plant's
+    set_load keywords."""
     return {key.rsplit(".", 1)[-1]: value for key, value in load.items()}
 
 

@@ -21,7 +21,7 @@ from typing import Any
 from pneu_msgs_py.lifecycle import signals
 from pneu_msgs_py.lifecycle.duration import MAX_DURATION_S
 from pneu_msgs_py.lifecycle.outputs import OutputDir
-from pneu_msgs_py.params.core import ParamError, with_updates
+from pneu_msgs_py.params.core import ParamError, unknown_key, with_updates
 from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_control.controller.params import load_controller_params
@@ -97,11 +97,11 @@ def prepare(
     updates: dict[str, Any] = (
         {"rotary.plumbing": effective} if hasattr(plant.rotary, "plumbing") else {}
     )
-    updates.update({_load_key(k): v for k, v in program.loads.items()})
-    try:
-        plant = with_updates(plant, updates)
-    except ParamError as err:
-        raise ParamError(f"{program.source}: loads: {err.key}", err.value, err.allowed) from None
+    plant = with_updates(plant, updates)
+    plant = _with_loads(plant, program.loads, f"{program.source}: loads")
+    loaded = plant
+    for seg in program.segments:  # each segment's loads, from its start on: checked now
+        loaded = _with_loads(loaded, seg.load, f"{program.source}: {seg.label}.load")
     controllers = {}
     for axis in ("linear", "rotary"):
         overrides = dict(program.controllers.get(axis, {}))
@@ -146,6 +146,21 @@ def prepare(
 
 def _load_key(key: str) -> str:
     return key if key.startswith("load.") else f"load.{key}"
+
+
+def _with_loads(plant: Any, loads: dict[str, Any], where: str) -> Any:
+    """``plant`` with the loads ``T_bk: 0.06`` (or ``load.T_bk``) set; one line naming
+    ``where`` and the load for a name or value refused."""
+    from pneu_sim.physics.params import LOAD_FIELDS
+
+    for key, value in loads.items():
+        if _load_key(str(key))[len("load.") :] not in LOAD_FIELDS:
+            allowed = unknown_key(key, LOAD_FIELDS).replace("no such parameter", "a load")
+            raise ParamError(f"{where}.{key}", value, allowed)
+    try:
+        return with_updates(plant, {_load_key(k): v for k, v in loads.items()})
+    except ParamError as err:
+        raise ParamError(f"{where}.{err.key[len('load.') :]}", err.value, err.allowed) from None
 
 
 def execute_task(

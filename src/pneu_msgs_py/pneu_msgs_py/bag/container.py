@@ -50,9 +50,12 @@ def _schema(sid: int, ros_type: str, text: bytes) -> bytes:
 
 class McapContainer:
     """One MCAP file being written (see the module docstring). ``qos_mode``: which
-    publisher QoS (:func:`pneu_msgs_py.contract.topics.qos_for`) the channels record."""
+    publisher QoS (:func:`pneu_msgs_py.contract.topics.qos_for`) the channels record;
+    ``partial``: the temporary name, if not ``NAME.partial`` (that is the input being read)."""
 
-    def __init__(self, path: Path, library: str, compression: str, qos_mode: str) -> None:
+    def __init__(
+        self, path: Path, library: str, compression: str, qos_mode: str, partial: Path | None = None
+    ) -> None:
         self.path = path
         self.qos_mode = qos_mode
         if compression == "zstd":
@@ -66,7 +69,7 @@ class McapContainer:
         else:
             self._compress = None
         self._comp_name = "" if compression == "none" else compression
-        self.partial_path = path.with_name(path.name + PARTIAL_SUFFIX)
+        self.partial_path = partial or path.with_name(path.name + PARTIAL_SUFFIX)
         self.finished = False
         try:
             self._f = open(self.partial_path, "xb")

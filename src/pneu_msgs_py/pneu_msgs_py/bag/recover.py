@@ -109,17 +109,26 @@ def _chunk_batches(chunk, f: McapFile, container: McapContainer, rep: RecoveryRe
     return batches, read
 
 
-def recover(source: str | os.PathLike, out: str | os.PathLike) -> RecoveryReport:
+def recover(
+    source: str | os.PathLike, out: str | os.PathLike, *, partial: str | os.PathLike | None = None
+) -> RecoveryReport:
     """Copy every readable message of ``source`` into the complete bag ``out`` (see the module).
 
-    ``out`` is written as ``out.partial`` and renamed when complete. Raises
+    ``out`` is written as ``partial`` (default ``out.partial``; another name when that is
+    ``source``: recovering ``run.mcap.partial`` onto ``run.mcap``) and renamed when complete. Raises
     :class:`EmptyBagError` (nothing readable, ``out`` not written) or another
     :class:`~pneu_msgs_py.bag.errors.BagError` for a file that is not a bag.
     """
     files, warn = bag_files(source)
     out = Path(out)
     rep = RecoveryReport(str(source), str(out), warnings=list(warn))
-    container = McapContainer(out, f"pneu_msgs_py {__version__} (pneu recover)", "zstd", "lockstep")
+    container = McapContainer(
+        out,
+        f"pneu_msgs_py {__version__} (pneu recover)",
+        "zstd",
+        "lockstep",
+        partial=Path(partial) if partial is not None else None,
+    )
     metadata: dict[str, dict[str, str]] = {}
     try:
         for path in files:

@@ -74,14 +74,17 @@ def _check_location(p: Path, field: str, shown: str, longest: str = "") -> None:
         what = "is a file" if q.is_file() else "is not a directory"
         raise ParamError(field, shown, f"a location under a directory ({q} {what})")
     _check_names(p, q, field, shown, longest)
-    if not os.access(q, os.W_OK | os.X_OK):
-        raise ParamError(field, shown, f"a writable location ({q}: permission denied)")
     try:
         fs = os.statvfs(q)
     except OSError:
-        return
-    if fs.f_flag & os.ST_RDONLY:
+        fs = None
+    # a read-only file system first: access() fails there too (EROFS), whoever asks
+    if fs is not None and fs.f_flag & os.ST_RDONLY:
         raise ParamError(field, shown, f"a writable location ({q} is on a read-only file system)")
+    if not os.access(q, os.W_OK | os.X_OK):
+        raise ParamError(field, shown, f"a writable location ({q}: permission denied)")
+    if fs is None:
+        return
     free = fs.f_bavail * fs.f_frsize
     if free < MIN_FREE_BYTES:
         raise ParamError(
@@ -302,7 +305,7 @@ class OutputFile:
             raise ParamError(
                 self.field, str(p), "a file name ending in " + " or ".join(self.suffixes)
             )
-        for f in (p, p.parent / (p.name + PARTIAL)):
+        for f in (p, self.partial):
             inp = _input_named(f, self.inputs)
             if inp is not None:
                 raise ParamError(
@@ -311,6 +314,13 @@ class OutputFile:
             _check_replaceable(f, self.field, str(p))
         if (p.exists() or p.is_symlink()) and not self.overwrite:
             raise ParamError(self.field, str(p), "a new file, or --overwrite to replace it")
+        if os.path.lexists(self.partial) and not self.overwrite:  # a killed command's
+            raise ParamError(
+                self.field,
+                str(p),
+                f"a new file, or --overwrite ({self.partial.name} is left by a command that did "
+                "not finish: pneu recover it, or --overwrite removes it)",
+            )
         _check_location(p.parent, self.field, str(p), self._lock_path.name)
         return self
 
@@ -327,6 +337,8 @@ class OutputFile:
         self._lock = _lock(self._lock_path, self.field, str(self.path))
         try:
             self.check()
+            if self.overwrite and os.path.lexists(self.partial):  # a killed command's
+                self.partial.unlink()
         except BaseException:
             self.__exit__(None, None, None)
             raise
@@ -339,7 +351,13 @@ class OutputFile:
 
     @property
     def partial(self) -> Path:
-        return self.path.parent / (self.path.name + PARTIAL)
+        """Where the file is written until complete: ``NAME.partial``, or ``NAME.new.partial``
+        when ``NAME.partial`` is an input (``pneu recover run.mcap.partial --out run.mcap``:
+        the cut bag is read, never replaced)."""
+        own = self.path.parent / (self.path.name + PARTIAL)
+        if any(is_same_path(own, i) for i in self.inputs):
+            return self.path.parent / (self.path.name + ".new" + PARTIAL)
+        return own
 
     def publish(self) -> Path:
         os.replace(self.partial, self.path)

@@ -228,7 +228,8 @@ def _check_value(key: str, value: Any, tp: Any, meta: Mapping[str, Any]) -> Any:
         return value
     elif tp is str:
         if not isinstance(value, str):
-            raise ParamError(key, value, f"a string, {allowed()}")
+            plain = not (meta.get("allowed") or meta.get("choices"))  # "a string" says it all
+            raise ParamError(key, value, "a string" if plain else f"a string, {allowed()}")
     elif typing.get_origin(tp) is tuple:
         if not isinstance(value, (list, tuple)):
             raise ParamError(key, value, "a list of numbers")
@@ -358,7 +359,7 @@ def with_updates(obj: Any, updates: Mapping[str, Any]) -> Any:
     known = flatten(obj)
     for key, value in updates.items():
         if key not in known:
-            raise ParamError(key, value, "no such parameter")
+            raise ParamError(key, value, unknown_key(key, known))
         node = nested
         parts = key.split(".")
         for part in parts[:-1]:

@@ -13,7 +13,9 @@ from typing import Any
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.yaml_file import read_scalar
 
-__all__ = ["parse_spec", "parse_value"]
+__all__ = ["parse_number", "parse_spec", "parse_value"]
+
+_INF_NAN = {"inf", "+inf", "-inf", "infinity", "+infinity", "-infinity", "nan"}
 
 
 def parse_value(text: str) -> Any:
@@ -23,6 +25,21 @@ def parse_value(text: str) -> Any:
     number or boolean field refuses them (:func:`pneu_msgs_py.params.yaml_file.read_scalar`).
     """
     return read_scalar(text)
+
+
+def parse_number(text: str, want: type = float) -> float | int:
+    """A number option as typed, read like the config files (``010`` 10, ``0x10`` 16,
+    ``3e5``; ``inf``/``nan`` words kept for the option's range to judge); ``want``: ``int``
+    or ``float``. ``1_000`` and ``1:00`` are not numbers (Python's ``float`` would read
+    1000, YAML 1.1 60): :class:`ValueError`, with the text to show."""
+    if want is float and text.strip().lower() in _INF_NAN:
+        return float(text)
+    v = read_scalar(text)
+    ok = (int,) if want is int else (int, float)
+    if isinstance(v, bool) or not isinstance(v, ok):
+        what = "an integer" if want is int else "a number"
+        raise ValueError(f"{text!r} is not {what} (read as typed: 1_000 and 1:00 are not numbers)")
+    return want(v)
 
 
 def parse_spec(

@@ -90,6 +90,10 @@ class _StrictLoader(yaml.SafeLoader):
     path = ""
     yaml_implicit_resolvers: ClassVar[dict] = {}  # filled below: the core schema, not YAML 1.1's
 
+    def construct_document(self, node: yaml.Node) -> Any:
+        _check_expansion(node, self.path)
+        return super().construct_document(node)
+
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> MarkedDict:
         if not isinstance(node, yaml.MappingNode):
             raise yaml.constructor.ConstructorError(
@@ -127,6 +131,42 @@ class _StrictLoader(yaml.SafeLoader):
             out[key] = self.construct_object(value_node, deep=deep)
             out.marks[key] = _pos(key_node.start_mark)
         return out
+
+
+MAX_EXPANSION = 10  # aliases may repeat a document's values, not multiply them ("YAML bomb")
+MIN_EXPANDED = 100_000  # values a document always may expand to
+
+
+def _check_expansion(root: yaml.Node, path: str) -> None:
+    """Refuse a document whose aliases (``*name``) expand it to more than :data:`MAX_EXPANSION`
+    times its own nodes (nine aliases of nine aliases of ...: a billion values from a
+    kilobyte, which every reader after this one would walk)."""
+    expanded: dict[int, int] = {}
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:  # post-order, each node once: the size of its expanded tree
+        node, done = stack.pop()
+        if id(node) in expanded:
+            continue
+        kids = (
+            [k for pair in node.value for k in pair]
+            if isinstance(node, yaml.MappingNode)
+            else (node.value if isinstance(node, yaml.SequenceNode) else [])
+        )
+        if done:
+            expanded[id(node)] = 1 + sum(expanded.get(id(k), 1) for k in kids)
+            continue
+        stack.append((node, True))
+        stack.extend((k, False) for k in kids if id(k) not in expanded)
+    total, distinct = expanded.get(id(root), 1), len(expanded)
+    if total > max(MIN_EXPANDED, MAX_EXPANSION * distinct):
+        line, col = _pos(root.start_mark)
+        raise ConfigFileError(
+            path,
+            f"its aliases (*name) expand {distinct} values to {total}; allowed: at most "
+            f"{MAX_EXPANSION} times the document's own (or {MIN_EXPANDED}) values",
+            line,
+            col,
+        )
 
 
 def _construct_map(loader: _StrictLoader, node: yaml.MappingNode) -> Iterator[MarkedDict]:
@@ -199,12 +239,19 @@ def load_yaml(path: str | os.PathLike) -> Any:
         decoded = text.decode("utf-8")
     except UnicodeDecodeError as err:
         raise ConfigFileError(p, f"not UTF-8 text (byte {err.start})") from None
-    loader = _StrictLoader(decoded)
-    loader.path = str(p)
+    loader = None
     try:
+        loader = _StrictLoader(decoded)  # its reader refuses control characters at once
+        loader.path = str(p)
         return loader.get_single_data()
     except ConfigFileError:
         raise
+    except yaml.reader.ReaderError as err:  # a control character (NUL, ...): not text
+        at = err.position
+        line, col = decoded.count("\n", 0, at) + 1, at - decoded.rfind("\n", 0, at)
+        raise ConfigFileError(
+            p, f"control character {err.character:#04x}; allowed: text", line, col
+        ) from None
     except yaml.MarkedYAMLError as err:
         mark = err.problem_mark or err.context_mark
         line, col = _pos(mark)
@@ -215,19 +262,22 @@ def load_yaml(path: str | os.PathLike) -> Any:
     except RecursionError:
         raise ConfigFileError(p, "nested too deeply") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def read_scalar(text: str) -> Any:
     """One value as this reader reads it in a file (YAML 1.2 core schema: ``010`` is 10,
     ``1:00`` a string); text YAML cannot parse (``a: b: c``) is the string itself."""
-    loader = _StrictLoader(text)
+    loader = None
     try:
+        loader = _StrictLoader(text)
         return loader.get_single_data()
-    except (yaml.YAMLError, ConfigFileError):
+    except (yaml.YAMLError, ConfigFileError, RecursionError):
         return text.strip()
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def _one_line(text: str) -> str:

@@ -15,6 +15,7 @@ from typing import Any
 from pneu_msgs_py.live import PACES
 from pneu_msgs_py.live.server import DEFAULT_PORT  # foxglove is imported when a server starts
 from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.spec import parse_number
 
 DEFAULT_HOST = "127.0.0.1"
 
@@ -23,9 +24,9 @@ __all__ = ["add_arguments", "open_live"]
 
 def _port(text: str) -> int:
     try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        v = parse_number(text, int)  # as typed: 8_765 is not 8765
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
     if not 0 <= v <= 65535:
         raise argparse.ArgumentTypeError(f"{v} outside 0 (any free port) to 65535")
     return v
@@ -33,9 +34,9 @@ def _port(text: str) -> int:
 
 def _wait(text: str) -> float:
     try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        v = parse_number(text, float)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
     if not 0.0 <= v <= 3600.0:
         raise argparse.ArgumentTypeError(f"{v:g} s outside [0, 3600] s")
     return v

@@ -22,6 +22,7 @@ from pneu_msgs_py.lifecycle import exits, signals
 from pneu_msgs_py.lifecycle.duration import check_duration
 from pneu_msgs_py.lifecycle.outputs import OutputDir
 from pneu_msgs_py.params.core import ParamError
+from pneu_msgs_py.params.spec import parse_number
 from pneu_msgs_py.params.yaml_file import from_option
 
 from pneu_sim.cli import live_options
@@ -51,9 +52,9 @@ CSV_COLUMNS = (
 
 def _voltage(text: str) -> float:
     try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        v = parse_number(text, float)  # as typed: 0_5 is not 5
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
     if not (0.0 <= v <= 10.0):  # NaN fails too
         raise argparse.ArgumentTypeError(f"{v:g} V outside the valve range [0, 10] V")
     return v
