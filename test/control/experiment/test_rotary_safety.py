@@ -154,6 +154,45 @@ def longest_driven_and_still(result, p):
     return best
 
 
+# ------------------------------------------------------------------ a vented inlet is no stuck sensor
+def longest_constant(v):
+    """Longest run of bit-identical consecutive values of ``v``."""
+    best = cur = 1
+    for a, b in zip(v[:-1], v[1:]):
+        cur = cur + 1 if a == b else 1
+        best = max(best, cur)
+    return best
+
+
+def test_a_vented_inlet_is_no_stuck_sensor_and_a_stuck_one_still_trips():
+    """Paper plumbing, coast to 90° and a second held vented (0 V): on plants whose p_m1
+    sensor offset is below zero the vented reading clips at the sensor's 0 V for far longer
+    than stuck_ms, bit-identical (the test checks it did); no rule trips. The same move with
+    the p_m1 sensor frozen while the motor is driven (a real stuck sensor) trips stuck."""
+    p = SafetyParams()
+    clipped = 0
+    for seed in range(6):
+        spec = dataclasses.replace(angle_spec("paper", {"kind": "constant", "value": 90.0}, 1.5),
+                                   seed=seed)  # fmt: skip
+        result = run(spec)
+        p_m1 = result.samples["p_m1"]
+        if longest_constant(p_m1) * T > 2 * p.stuck_ms * 1e-3:
+            clipped += 1
+            assert p_m1[-1] == spec.plant.ambient.p_a  # the sensor's zero: atmosphere, clipped
+        assert errors(result) == [], seed
+    assert clipped >= 2  # the exemption was exercised (6 seeds: offsets drawn in ±0.5 % FS)
+    spec = angle_spec("paper", {"kind": "constant", "value": 90.0}, 1.0)
+    driving = run(spec)
+    k = int(np.argmax(driving.samples["p_m1"]))  # the inlet at its highest: driven
+    fault = f"stuck_sensor:sensor=p_m1,start_s={k * T:.3f},duration_s=0.5"
+    result = run(build_spec(
+        axes=("rotary",), controller="coast", sets=["rotary_control=angle",
+        "reference.kind=constant", "reference.value=90.0"], duration_s=1.0, plant=spec.plant,
+        safety=spec.safety, faults=[fault],
+    ))  # fmt: skip
+    assert ("rotary", "stuck") in errors(result)
+
+
 # ------------------------------------------------------------------ a task ends safe
 def test_a_blocked_task_segment_aborts_with_both_valves_safe(tmp_path):
     """A rotate segment against a load that never breaks away: the stall rule trips, the task
