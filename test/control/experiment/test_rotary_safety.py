@@ -2,20 +2,21 @@
 a task that ends safe; the pre-run checks of an angle reference.
 
 Each run is the in-process runner on the nominal twin in ``rotary_control: angle`` with the
-controllers a task uses (coast with the paper's plumbing, the bidirectional LADRC of
-:data:`pneu_control.task.session.BIDIRECTIONAL_ROTARY`). Bounds come from the rules'
+controllers a task uses (:func:`pneu_control.task.session.rotary_defaults`: coast with the
+paper's plumbing, pva with the bidirectional one). Bounds come from the rules'
 definitions applied to the recorded samples and valve voltages, not from stored numbers.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
 from pneu_control.experiment.runner import run
 from pneu_control.experiment.session import build_spec
-from pneu_control.task.session import BIDIRECTIONAL_ROTARY
+from pneu_control.task.session import rotary_defaults
 from pneu_driver.safety import SafetyParams
 from pneu_msgs_py.params.core import ParamError, with_updates
 from pneu_sim.physics.plant_file import load_plant
@@ -27,11 +28,9 @@ T = 1e-3  # the twin's sample period (config/plant.yaml sim.T)
 def angle_spec(plumbing, reference, duration_s, loads=None, **safety):
     """A rotary angle run; ``reference``: the reference.* fields (degrees)."""
     sets = ["rotary_control=angle", *(f"reference.{k}={v}" for k, v in reference.items())]
-    if plumbing == "bidirectional":
-        alg = "ladrc"
-        sets += [f"{k}={v}" for k, v in BIDIRECTIONAL_ROTARY.items() if k != "algorithm"]
-    else:
-        alg = "coast"
+    defaults = rotary_defaults(plumbing)  # what a task runs with this plumbing
+    alg = defaults["algorithm"]
+    sets += [f"{k}={v}" for k, v in defaults.items() if k not in ("algorithm", "rotary_control")]
     updates = {"rotary.plumbing": plumbing, **{f"load.{k}": v for k, v in (loads or {}).items()}}
     plant = with_updates(load_plant(), updates)
     sp = SafetyParams(rotary_plumbing=plumbing)
@@ -158,7 +157,7 @@ def longest_driven_and_still(result, p):
 def longest_constant(v):
     """Longest run of bit-identical consecutive values of ``v``."""
     best = cur = 1
-    for a, b in zip(v[:-1], v[1:]):
+    for a, b in itertools.pairwise(v):
         cur = cur + 1 if a == b else 1
         best = max(best, cur)
     return best
