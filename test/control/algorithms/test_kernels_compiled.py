@@ -67,6 +67,14 @@ CASES = [
     ("eso_smc", "rotary", PAPER, {"rotary_control": "angle"}),
     ("coast", "rotary", PAPER, {"rotary_control": "angle"}),
     ("coast", "rotary", RETUNED, {"rotary_control": "angle", "coast.overshoot": "hold"}),
+    ("pva", "rotary", PAPER, {"rotary_control": "angle"}),
+    # every remainder at rest pulsed; the whole disturbance estimate taken out
+    (
+        "pva",
+        "rotary",
+        RETUNED,
+        {"rotary_control": "angle", "pva.pulse_max_deg": 400.0, "pva.disturbance_share": 1.0},
+    ),
     ("eso_smc_plus", "linear", PAPER, {}),  # position, friction feed-forward
     ("eso_smc_plus", "linear", PAPER, {"eso_smc_plus.friction_feedforward": False}),
     ("eso_smc_plus", "linear", PAPER, {**PLUS_DC}),

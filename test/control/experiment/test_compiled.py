@@ -271,15 +271,14 @@ def test_each_supervisor_rule_acts_the_same(overrides, rule):
 def angle_spec(plumbing, reference, duration_s=0.6, loads=None, **safety):
     """A rotary angle run with the controllers a task uses; the supervisor swapped in after
     the checks (a reference beyond the angle soft limits would be refused)."""
-    from pneu_control.task.session import BIDIRECTIONAL_ROTARY
+    from pneu_control.task.session import rotary_defaults
     from pneu_msgs_py.params.core import with_updates
     from pneu_sim.physics.plant_file import load_plant
 
     sets = ["rotary_control=angle", *(f"reference.{k}={v}" for k, v in reference.items())]
-    alg = "coast"
-    if plumbing == "bidirectional":
-        alg = "ladrc"
-        sets += [f"{k}={v}" for k, v in BIDIRECTIONAL_ROTARY.items() if k != "algorithm"]
+    defaults = rotary_defaults(plumbing)  # what a task runs with this plumbing
+    alg = defaults["algorithm"]
+    sets += [f"{k}={v}" for k, v in defaults.items() if k not in ("algorithm", "rotary_control")]
     updates = {"rotary.plumbing": plumbing, **{f"load.{k}": v for k, v in (loads or {}).items()}}
     sp = SafetyParams(rotary_plumbing=plumbing)
     spec = spec_of(

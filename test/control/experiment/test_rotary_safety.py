@@ -2,20 +2,21 @@
 a task that ends safe; the pre-run checks of an angle reference.
 
 Each run is the in-process runner on the nominal twin in ``rotary_control: angle`` with the
-controllers a task uses (coast with the paper's plumbing, the bidirectional LADRC of
-:data:`pneu_control.task.session.BIDIRECTIONAL_ROTARY`). Bounds come from the rules'
+controllers a task uses (:func:`pneu_control.task.session.rotary_defaults`: coast with the
+paper's plumbing, pva with the bidirectional one). Bounds come from the rules'
 definitions applied to the recorded samples and valve voltages, not from stored numbers.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
 from pneu_control.experiment.runner import run
 from pneu_control.experiment.session import build_spec
-from pneu_control.task.session import BIDIRECTIONAL_ROTARY
+from pneu_control.task.session import rotary_defaults
 from pneu_driver.safety import SafetyParams
 from pneu_msgs_py.params.core import ParamError, with_updates
 from pneu_sim.physics.plant_file import load_plant
@@ -27,11 +28,9 @@ T = 1e-3  # the twin's sample period (config/plant.yaml sim.T)
 def angle_spec(plumbing, reference, duration_s, loads=None, **safety):
     """A rotary angle run; ``reference``: the reference.* fields (degrees)."""
     sets = ["rotary_control=angle", *(f"reference.{k}={v}" for k, v in reference.items())]
-    if plumbing == "bidirectional":
-        alg = "ladrc"
-        sets += [f"{k}={v}" for k, v in BIDIRECTIONAL_ROTARY.items() if k != "algorithm"]
-    else:
-        alg = "coast"
+    defaults = rotary_defaults(plumbing)  # what a task runs with this plumbing
+    alg = defaults["algorithm"]
+    sets += [f"{k}={v}" for k, v in defaults.items() if k not in ("algorithm", "rotary_control")]
     updates = {"rotary.plumbing": plumbing, **{f"load.{k}": v for k, v in (loads or {}).items()}}
     plant = with_updates(load_plant(), updates)
     sp = SafetyParams(rotary_plumbing=plumbing)
@@ -152,6 +151,45 @@ def longest_driven_and_still(result, p):
         cur = cur + 1 if flag else 0
         best = max(best, cur)
     return best
+
+
+# ------------------------------------------------------------------ a vented inlet is no stuck sensor
+def longest_constant(v):
+    """Longest run of bit-identical consecutive values of ``v``."""
+    best = cur = 1
+    for a, b in itertools.pairwise(v):
+        cur = cur + 1 if a == b else 1
+        best = max(best, cur)
+    return best
+
+
+def test_a_vented_inlet_is_no_stuck_sensor_and_a_stuck_one_still_trips():
+    """Paper plumbing, coast to 90° and a second held vented (0 V): on plants whose p_m1
+    sensor offset is below zero the vented reading clips at the sensor's 0 V for far longer
+    than stuck_ms, bit-identical (the test checks it did); no rule trips. The same move with
+    the p_m1 sensor frozen while the motor is driven (a real stuck sensor) trips stuck."""
+    p = SafetyParams()
+    clipped = 0
+    for seed in range(6):
+        spec = dataclasses.replace(angle_spec("paper", {"kind": "constant", "value": 90.0}, 1.5),
+                                   seed=seed)  # fmt: skip
+        result = run(spec)
+        p_m1 = result.samples["p_m1"]
+        if longest_constant(p_m1) * T > 2 * p.stuck_ms * 1e-3:
+            clipped += 1
+            assert p_m1[-1] == spec.plant.ambient.p_a  # the sensor's zero: atmosphere, clipped
+        assert errors(result) == [], seed
+    assert clipped >= 2  # the exemption was exercised (6 seeds: offsets drawn in ±0.5 % FS)
+    spec = angle_spec("paper", {"kind": "constant", "value": 90.0}, 1.0)
+    driving = run(spec)
+    k = int(np.argmax(driving.samples["p_m1"]))  # the inlet at its highest: driven
+    fault = f"stuck_sensor:sensor=p_m1,start_s={k * T:.3f},duration_s=0.5"
+    result = run(build_spec(
+        axes=("rotary",), controller="coast", sets=["rotary_control=angle",
+        "reference.kind=constant", "reference.value=90.0"], duration_s=1.0, plant=spec.plant,
+        safety=spec.safety, faults=[fault],
+    ))  # fmt: skip
+    assert ("rotary", "stuck") in errors(result)
 
 
 # ------------------------------------------------------------------ a task ends safe

@@ -313,6 +313,40 @@ def test_stuck_value_exactly_at_stuck_ms():
     assert out == (5.0, 6.0)
 
 
+def _volts_with_p_m1(r, v_m1):
+    """Raw volts of tick r.k + 1: live (wiggling) cylinder and laser channels, p_m1 at v_m1."""
+    w = 1e-4 * ((r.k + 1) % 2)
+    return (2.0 + w, 1.5 - w, v_m1, 2.5 + w)
+
+
+def test_a_vented_inlet_reading_the_sensor_floor_is_not_frozen():
+    """p_m1 at 0 V (atmosphere: the 0-10 V sensor clips at its zero) while valve #2 vents the
+    inlet is no frozen sensor, for as long as it lasts (the paper's plumbing holds the inlet
+    vented at 0 V); the same reading with the inlet not vented, or any other constant reading
+    while vented, trips after stuck_ms as before."""
+    p = SafetyParams()
+    n = int(p.stuck_ms)
+    vented = 5.0 - p.stall_band_v - 0.01  # just beyond the band: the inlet open to exhaust
+    r = Rig()
+    for _ in range(3 * n):
+        out = r.tick(raw_volts=_volts_with_p_m1(r, 0.0), u=(7.0, vented), p_m1=101325.0)
+    assert out == (7.0, vented)
+    assert not [e for e in r.sup.events() if e.level == ERROR]
+    # the valve leaves the vent (the band's edge: not vented): the reading still at 0 V is
+    # frozen from the first sample not vented on; the first strictly beyond stuck_ms trips
+    edge = 5.0 - p.stall_band_v
+    outs = [r.tick(raw_volts=_volts_with_p_m1(r, 0.0), u=(7.0, edge)) for _ in range(n + 2)]
+    assert outs[n] == (7.0, edge) and outs[n + 1] == (7.0, 5.0)
+    [ev] = [e for e in r.sup.events() if e.level == ERROR]
+    assert (ev.axis, ev.rule) == ("rotary", "stuck") and "p_m1" in ev.message
+    # vented, but stuck at a live value (not the floor): trips as any frozen sensor
+    for u_r, v_m1 in ((0.0, 0.25), (7.0, 0.0), (5.0, 0.0)):
+        r = Rig()
+        outs = [r.tick(raw_volts=_volts_with_p_m1(r, v_m1), u=(7.0, u_r)) for _ in range(n + 2)]
+        assert outs[-1][1] == 5.0, (u_r, v_m1)
+        assert ("rotary", "stuck") in rules(r.sup.events(), ERROR)
+
+
 def test_output_sanity_never_writes_a_bad_command():
     for bad in (math.nan, math.inf, -0.001, 10.001):
         r = Rig()

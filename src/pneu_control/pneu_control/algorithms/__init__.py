@@ -1,4 +1,4 @@
-"""Control algorithms behind one interface (:mod:`.base`): PID, LADRC, ESO-SMC, ESO-SMC+ and coast (ours).
+"""Control algorithms behind one interface (:mod:`.base`): PID, LADRC, ESO-SMC, ESO-SMC+, coast and pva (ours).
 
 Each module holds one algorithm and its parameter group; :mod:`.smc` what the
 sliding-mode laws share, :mod:`.valve_curve` the MPYE flow linearisation.
@@ -19,6 +19,7 @@ from pneu_control.algorithms.eso_smc import EsoSmc, EsoSmcParams
 from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus, EsoSmcPlusParams
 from pneu_control.algorithms.ladrc import Ladrc, LadrcParams
 from pneu_control.algorithms.pid import Pid, PidParams
+from pneu_control.algorithms.pva import Pva, PvaParams
 
 if TYPE_CHECKING:
     from pneu_control.controller.params import AxisControllerParams
@@ -31,11 +32,13 @@ __all__ = [
     "EsoSmcParams",
     "EsoSmcPlusParams",
     "CoastParams",
+    "PvaParams",
     "Pid",
     "Ladrc",
     "EsoSmc",
     "EsoSmcPlus",
     "Coast",
+    "Pva",
     "make_algorithm",
     "ALGORITHM_CLASSES",
 ]
@@ -46,6 +49,7 @@ ALGORITHM_CLASSES = {
     "eso_smc": EsoSmc,
     "eso_smc_plus": EsoSmcPlus,
     "coast": Coast,
+    "pva": Pva,
 }
 
 

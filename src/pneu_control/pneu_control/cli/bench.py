@@ -1,4 +1,5 @@
-"""``pneu bench``: speed figures of the stack (rates and ratios, machine noted).
+"""``pneu bench``: speed figures of the stack (rates and ratios, machine noted); ``pneu bench
+angle``: rotary angle positioning on the twin, both plumbings (:mod:`pneu_control.bench.angle`).
 
 Benchmarks, not tests: nothing here asserts a time. Each figure is computed
 by the package that owns the code it measures; this module only collects.
@@ -21,8 +22,11 @@ from typing import Any
 NAME = "bench"
 HELP = (
     "measure plant, closed-loop (Python and compiled), sweep, logging, analysis, shell and "
-    "loop-pacing speed (JSON with --json)"
+    "loop-pacing speed (JSON with --json); 'pneu bench angle': angle moves, the screw path "
+    "and the shipped tasks on the nominal twin and over the plant band, both plumbings"
 )
+ANGLE_ARTEFACTS = ("angle_bench.json", "angle_bench.md")
+MAX_ANGLE_SAMPLES = 1000
 
 FIGURES = (
     "plant_rtf",
@@ -41,7 +45,34 @@ FIGURES = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The ``pneu bench`` options on ``p``."""
+    p.add_argument(
+        "what",
+        nargs="?",
+        choices=("speed", "angle"),
+        default="speed",
+        help="speed (default): the speed figures; angle: the angle positioning benchmark",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    angle = p.add_argument_group("pneu bench angle")
+    angle.add_argument(
+        "--samples", type=int, default=None, metavar="N",
+        help="plants drawn from the plant band besides the nominal one (default 40)",
+    )  # fmt: skip
+    angle.add_argument("--seed", type=int, default=None, help="plant draws and noise (default 0)")
+    angle.add_argument(
+        "--workers", type=int, default=None, metavar="N", help="processes (default: the cores)"
+    )
+    angle.add_argument(
+        "--serial", action="store_true", help="every run in this process (no worker processes)"
+    )
+    angle.add_argument("--no-tasks", action="store_true", help="the moves only")
+    angle.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml with ranges")
+    angle.add_argument("--controllers", default=None, metavar="FILE", help="controllers.yaml")
+    angle.add_argument("--safety", default=None, metavar="FILE", help="safety.yaml")
+    angle.add_argument(
+        "--out", default=None, metavar="DIR", help="also write angle_bench.json and .md there"
+    )
+    angle.add_argument("--overwrite", action="store_true", help="replace an earlier --out")
     p.add_argument(
         "--only",
         action="append",
@@ -162,9 +193,95 @@ def _groups(quick: bool) -> dict[str, Callable[[], dict[str, Any]]]:
     }
 
 
+_ANGLE_ONLY = (
+    ("samples", "--samples"), ("seed", "--seed"), ("workers", "--workers"),
+    ("serial", "--serial"), ("no_tasks", "--no-tasks"), ("plant", "--plant"),
+    ("controllers", "--controllers"), ("safety", "--safety"), ("out", "--out"),
+    ("overwrite", "--overwrite"),
+)  # fmt: skip
+
+
+def run_angle(args: argparse.Namespace) -> int:
+    """``pneu bench angle``: plan, run and print the angle benchmark (JSON with ``--json``),
+    ``--out DIR``: also its files; the exit code."""
+    from pneu_msgs_py.lifecycle import signals
+    from pneu_msgs_py.lifecycle.outputs import OutputDir
+    from pneu_msgs_py.params.core import ParamError
+    from pneu_msgs_py.params.yaml_file import from_option
+
+    from pneu_control.bench import angle
+    from pneu_control.cli.progress import progress_bar, progress_to
+    from pneu_control.experiment.session import check_seed
+    from pneu_control.sweep.executors import default_workers
+
+    if args.only or args.quick:
+        raise ParamError("--only" if args.only else "--quick", True, "not with 'pneu bench angle'")
+    samples = 40 if args.samples is None else args.samples
+    seed = 0 if args.seed is None else args.seed
+    if not 1 <= samples <= MAX_ANGLE_SAMPLES:
+        raise ParamError("--samples", samples, f"an integer in [1, {MAX_ANGLE_SAMPLES}]")
+    check_seed(seed)
+    check_seed(seed + samples, "--seed + --samples")
+    if args.workers is not None and not 1 <= args.workers <= 1024:
+        raise ParamError("--workers", args.workers, "an integer in [1, 1024]")
+    if args.serial and args.workers is not None:
+        raise ParamError("--workers", args.workers, "not with --serial (one process)")
+    claim = None
+    if args.out is not None:
+        claim = OutputDir(
+            args.out,
+            ANGLE_ARTEFACTS,
+            overwrite=args.overwrite,
+            inputs=[args.plant, args.controllers, args.safety],
+        ).check()
+    elif args.overwrite:
+        raise ParamError("--overwrite", True, "only with --out")
+    with from_option("--plant" if args.plant else None):
+        bench = angle.plan_angle_bench(
+            samples=samples,
+            seed=seed,
+            plant_file=args.plant,
+            controllers_file=args.controllers,
+            safety_file=args.safety,
+            tasks=not args.no_tasks,
+        )
+    executor = "serial" if args.serial else "local"
+    workers = args.workers or default_workers()
+    print(
+        f"pneu bench angle: {len(bench.items)} runs (nominal + {samples} plants, "
+        f"{len(bench.factors)} factors, seed {seed}) on {executor}"
+        + ("" if args.serial else f" ({workers} workers)"),
+        file=sys.stderr,
+    )
+    bar = progress_bar(len(bench.items), "pneu bench angle", unit="run")
+    try:
+        summary = angle.run_bench(
+            bench, executor=executor, workers=workers, progress=progress_to(bar, "bench angle")
+        )
+    finally:
+        bar.close()
+    md = angle.render_markdown(summary)
+    text = json.dumps(summary, indent=2, sort_keys=True) + "\n"
+    if claim is not None:
+        with claim, signals.deferred():
+            claim.partial("angle_bench.json").write_text(text, encoding="utf-8")
+            claim.partial("angle_bench.md").write_text(md, encoding="utf-8")
+            claim.publish(*ANGLE_ARTEFACTS)
+    print(text if args.json else md, end="")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """``pneu bench``: run the benchmark groups, print their figures (JSON with ``--json``); the
     exit code."""
+    if args.what == "angle":
+        return run_angle(args)
+    for field, flag in _ANGLE_ONLY:
+        v = getattr(args, field)
+        if v not in (None, False):
+            from pneu_msgs_py.params.core import ParamError
+
+            raise ParamError(flag, v, "only with 'pneu bench angle'")
     results: dict[str, Any] = {"machine": machine()}
     groups = _groups(args.quick)
     for name, fn in groups.items():

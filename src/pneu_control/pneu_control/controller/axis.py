@@ -55,13 +55,18 @@ from pneu_msgs_py.params.records import RecordType, kernel
 
 from pneu_control.algorithms import make_algorithm
 from pneu_control.algorithms.base import MAX_HISTORY, StepInput
-from pneu_control.controller.params import AxisControllerParams
+from pneu_control.controller.params import (
+    ANGLE_ONLY_ALGORITHMS,
+    AXIS_ALGORITHMS,
+    AxisControllerParams,
+)
 from pneu_control.controller.references import axis_scale, make_reference
 from pneu_control.observers.td import td_step
 
 # the algorithms that position a rotary angle (rotary_control: angle): the generic
-# second-order laws, and coast (one-way drive, the paper's plumbing)
-ANGLE_ALGORITHMS = ("pid", "ladrc", "eso_smc", "coast")
+# second-order laws, coast (one-way drive, the paper's plumbing) and pva (both ways, the
+# bidirectional plumbing)
+ANGLE_ALGORITHMS = ("pid", "ladrc", "eso_smc", "coast", "pva")
 
 __all__ = [
     "ANGLE_ALGORITHMS",
@@ -281,11 +286,11 @@ class AxisController:
                 params.algorithm,
                 f"one of {', '.join(ANGLE_ALGORITHMS)} with rotary_control: angle",
             )
-        if not angle_control and params.algorithm == "coast":
+        if not angle_control and params.algorithm in ANGLE_ONLY_ALGORITHMS:
             raise ParamError(
                 "algorithm",
-                "coast",
-                "pid, ladrc, eso_smc or eso_smc_plus (coast positions an angle: "
+                params.algorithm,
+                f"{', '.join(AXIS_ALGORITHMS)} ({params.algorithm} positions an angle: "
                 "rotary_control: angle)",
             )
         ref = make_reference(

@@ -43,6 +43,7 @@ from pneu_control.algorithms import (
     EsoSmcPlusParams,
     LadrcParams,
     PidParams,
+    PvaParams,
 )
 
 __all__ = [
@@ -60,9 +61,10 @@ __all__ = [
     "ParamError",
 ]
 
-ALGORITHMS = ("pid", "ladrc", "eso_smc", "eso_smc_plus", "coast")
-# coast positions a rotary angle only (rotary_control: angle); the others run on every axis
-ANGLE_ONLY_ALGORITHMS = ("coast",)
+ALGORITHMS = ("pid", "ladrc", "eso_smc", "eso_smc_plus", "coast", "pva")
+# coast and pva position a rotary angle only (rotary_control: angle); the others run on every
+# axis
+ANGLE_ONLY_ALGORITHMS = ("coast", "pva")
 AXIS_ALGORITHMS = tuple(a for a in ALGORITHMS if a not in ANGLE_ONLY_ALGORITHMS)
 REFERENCE_KINDS = ("sine", "smooth_step", "constant", "ramp", "waypoints")
 # the ReferenceParams fields each kind reads (references.make_reference): a key of another
@@ -187,6 +189,7 @@ class AxisControllerParams:
     eso_smc: EsoSmcParams = param(EsoSmcParams)
     eso_smc_plus: EsoSmcPlusParams = param(EsoSmcPlusParams)
     coast: CoastParams = param(CoastParams)
+    pva: PvaParams = param(PvaParams)
     td: TdParams = param(TdParams)
     limits: LimitsParams = param(LimitsParams)
     reference: ReferenceParams = param(ReferenceParams)

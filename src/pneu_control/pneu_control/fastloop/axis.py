@@ -20,6 +20,7 @@ from pneu_control.algorithms.eso_smc import EsoSmc
 from pneu_control.algorithms.eso_smc_plus import EsoSmcPlus
 from pneu_control.algorithms.ladrc import Ladrc
 from pneu_control.algorithms.pid import Pid
+from pneu_control.algorithms.pva import Pva
 from pneu_control.controller.axis import (
     cold_inputs,
     finish,
@@ -40,6 +41,7 @@ _start1, _update1 = Ladrc.KERNEL.start, Ladrc.KERNEL.update
 _start2, _update2 = EsoSmc.KERNEL.start, EsoSmc.KERNEL.update
 _start3, _update3 = EsoSmcPlus.KERNEL.start, EsoSmcPlus.KERNEL.update
 _start4, _update4 = Coast.KERNEL.start, Coast.KERNEL.update
+_start5, _update5 = Pva.KERNEL.start, Pva.KERNEL.update
 
 
 @njit(**JIT)
@@ -52,7 +54,9 @@ def _start(code, a, algs, tab, inp):
         return _start2(algs[4][a], algs[5][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
     if code == 3:
         return _start3(algs[6][a], algs[7][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
-    return _start4(algs[8][a], algs[9][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
+    if code == 4:
+        return _start4(algs[8][a], algs[9][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
+    return _start5(algs[10][a], algs[11][a], tab, inp, _NAN, _NAN, _NAN, _NAN)
 
 
 @njit(**JIT)
@@ -65,7 +69,9 @@ def _update(code, a, algs, tab, inp):
         return _update2(algs[4][a], algs[5][a], tab, inp)
     if code == 3:
         return _update3(algs[6][a], algs[7][a], tab, inp)
-    return _update4(algs[8][a], algs[9][a], tab, inp)
+    if code == 4:
+        return _update4(algs[8][a], algs[9][a], tab, inp)
+    return _update5(algs[10][a], algs[11][a], tab, inp)
 
 
 @njit(**JIT)
@@ -79,7 +85,9 @@ def _estimates(code, a, algs):
         return _z(algs[5][a])
     if code == 3:
         return _z(algs[7][a])
-    return _z(algs[9][a])
+    if code == 4:
+        return _z(algs[9][a])
+    return _z(algs[11][a])
 
 
 @njit(**JIT)

@@ -13,7 +13,7 @@ __all__ = ["COMPILED", "JIT", "N_REC", "N_REC_AXIS", "REC_AXIS", "REC_HELD", "RE
 
 # the algorithms the loop dispatches, by name: code = index (fastloop/axis.py). An algorithm
 # registered in pneu_control.algorithms but not here runs in the Python runner (one line says so).
-COMPILED = ("pid", "ladrc", "eso_smc", "eso_smc_plus", "coast")
+COMPILED = ("pid", "ladrc", "eso_smc", "eso_smc_plus", "coast", "pva")
 
 # one recorded row per cycle: the sample (p_c1, p_c2, p_m1, x, theta, omega, counts), the
 # held output (linear, rotary), then per axis STATE_FIELDS (11) and the command u

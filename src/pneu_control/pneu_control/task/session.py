@@ -32,25 +32,28 @@ from pneu_control.task.runner import SAFE_TAIL_S, TaskDriver
 __all__ = [
     "ARTEFACTS",
     "BIDIRECTIONAL_ROTARY",
+    "PAPER_ROTARY",
     "PreparedTask",
     "execute_task",
     "prepare",
+    "rotary_defaults",
 ]
 
 ARTEFACTS = ("run.mcap", "metrics.json", "timeseries.npz")
 REPORTS = ("task_report.json", "task_report.md", "task.png")
 
-# the rotary angle loop with the bidirectional plumbing (the valve drives both ways): LADRC
-# on θ (°). Estimated on the twin: b0 from the open-loop torque per volt (≈ 1e5 °/s²/V at
-# small openings), controller bandwidth 25 1/s and observer 150 rad/s (ω0 ≈ 6 ω_c), the
-# TD's r bounding the reference acceleration (°/s²); docs/composite-motion.md has the figures.
-BIDIRECTIONAL_ROTARY: dict[str, Any] = {
-    "algorithm": "ladrc",
-    "ladrc.lambda_1": 25.0,
-    "ladrc.omega_0": 150.0,
-    "ladrc.b_0": 100000.0,
-    "td.r": 200000.0,
-}
+# the rotary angle loop with the bidirectional plumbing (the valve drives and brakes both
+# ways): pva (algorithms/pva.py), with its gains from controllers.yaml; with the paper's
+# plumbing: coast. docs/composite-motion.md has the figures (pneu bench angle).
+BIDIRECTIONAL_ROTARY: dict[str, Any] = {"algorithm": "pva"}
+PAPER_ROTARY: dict[str, Any] = {"algorithm": "coast"}
+
+
+def rotary_defaults(plumbing: str) -> dict[str, Any]:
+    """The rotary axis's overrides of a task (and of ``pneu bench angle``) with ``plumbing``,
+    when the task names no algorithm: ``rotary_control: angle`` and the plumbing's law."""
+    law = PAPER_ROTARY if plumbing == "paper" else BIDIRECTIONAL_ROTARY
+    return {**law, "rotary_control": "angle", "rotary_model": "speed"}
 
 
 @dataclass(frozen=True)
@@ -106,11 +109,10 @@ def prepare(
     for axis in ("linear", "rotary"):
         overrides = dict(program.controllers.get(axis, {}))
         if axis == "rotary":
-            defaults = {"algorithm": "coast"} if effective == "paper" else BIDIRECTIONAL_ROTARY
+            defaults = rotary_defaults(effective)
             if "algorithm" in overrides:
-                defaults = {}
+                defaults = {k: v for k, v in defaults.items() if k != "algorithm"}
             overrides = {**defaults, **overrides, "rotary_control": "angle"}
-            overrides.setdefault("rotary_model", "speed")
         overrides.setdefault("reference.kind", "constant")
         overrides.setdefault("reference.value", 0.0)
         with from_option("--controllers" if controllers_file else None):

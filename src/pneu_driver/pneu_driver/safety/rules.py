@@ -52,6 +52,7 @@ __all__ = [
     "angle_zone",
     "command",
     "fresh_array",
+    "inlet_vented",
     "jump_allowance",
     "non_finite_fields",
     "output_v",
@@ -72,6 +73,9 @@ _W = WINDOW_MAX + 1
 _TWO_PI = 2.0 * math.pi
 
 ANALOG = ("p_c1", "p_c2", "p_m1", "x")  # the analog channels (raw volts order; laser = x)
+# the pressure sensors' lowest output: Huba 511, 0-10 V for 0-10 bar gauge (rig.yaml); at or
+# below atmosphere the reading clips here
+P_FLOOR_V = 0.0
 FIELDS = ("p_c1", "p_c2", "p_m1", "x", "theta", "omega")  # sample fields checked finite
 FIELD_SENSOR = ("p_c1", "p_c2", "p_m1", "x", "encoder", "encoder")
 
@@ -369,13 +373,29 @@ def angle_faults(th, c):
 
 
 @kernel
-def frozen_faults(th, s, now, values):
+def inlet_vented(th, s):
+    """Valve #2 held below SAFE_V − the stall band (``s.u_out[1]``, the last period's output):
+    motor port A, the inlet p_m1, is open to the valve's exhaust (both plumbings)."""
+    return SAFE_V - s.u_out[1] > th.stall_band_v
+
+
+@kernel
+def frozen_faults(th, s, now, values, have_volts):
     """An analog value (``values``: the raw volts, else the SI values) bit-identical for
-    longer than ``stuck_ns``."""
+    longer than ``stuck_ms``.
+
+    Not frozen: the inlet's raw reading at or below :data:`P_FLOOR_V` while the valve vents
+    the inlet (:func:`inlet_vented`): at atmosphere a 0–10 V gauge sensor's output clips at
+    its zero, a constant that a live sensor gives (the paper's plumbing holds the inlet
+    vented at 0 V). Its clock restarts every such sample: a reading stuck at 0 V trips once
+    the inlet has not been vented for ``stuck_ms`` (fed or closed, the inlet's pressure
+    rises), a reading stuck anywhere else as before. Without raw volts, no exemption.
+    """
     keys = 0
+    vented = have_volts and inlet_vented(th, s)
     for i in range(4):
         v = values[i]
-        if v != s.frozen_v[i]:
+        if v != s.frozen_v[i] or (i == 2 and vented and v <= P_FLOOR_V):
             s.frozen_v[i] = v
             s.frozen_t[i] = now
         elif now - s.frozen_t[i] > th.stuck_ns:
@@ -496,7 +516,7 @@ def sample_faults(th, s, d, now, p_c1, p_c2, p_m1, x, c, values, have_volts):
         keys |= voltage_faults(th, d, values)
     keys |= pressure_faults(th, p_c1, p_c2, p_m1)
     keys |= position_faults(th, x)
-    keys |= frozen_faults(th, s, now, values)
+    keys |= frozen_faults(th, s, now, values, have_volts)
     track_velocity(th, s, now, x)
     keys |= encoder_faults(th, s, d, now, c)
     keys |= angle_faults(th, c)
