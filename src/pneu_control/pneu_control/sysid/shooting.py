@@ -78,11 +78,14 @@ def _cuts(rec: Record, axis: str, segment_s: float) -> list[tuple[int, int]]:
 
 
 def segments_of(rec: Record, axis: str, segment_s: float) -> Segments:
-    """Segments of at most ``segment_s`` (∞: one from the first sample) fully inside
-    ``rec.valid[axis]``, with every compared sample finite."""
+    """Segments of at most ``segment_s`` fully inside ``rec.valid[axis]``, with every compared
+    sample finite; ``segment_s`` = ∞: one from the first sample of each stretch of such data
+    (the whole record when all of it is valid)."""
     ok = rec.valid[axis].copy()
     for name in AXIS_SIGNALS[axis]:
         ok &= np.isfinite(rec.y[name])
+    if math.isinf(segment_s):
+        return _stretches(ok)
     bad = np.concatenate(([0], np.cumsum(~ok)))
     keep = [
         (s, n)
@@ -93,6 +96,21 @@ def segments_of(rec: Record, axis: str, segment_s: float) -> Segments:
         np.array([s for s, _ in keep], dtype=np.int64),
         np.array([n for _, n in keep], dtype=np.int64),
     )
+
+
+def _stretches(ok: np.ndarray) -> Segments:
+    """One segment per run of ``ok`` samples: from _X_FIT samples into it (the start's line
+    fit) to its end, inside the record's margins; at least two samples."""
+    n = len(ok)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], ok.astype(np.int8), [0]))))
+    starts, lengths = [], []
+    for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):  # run [a, b)
+        s = max(a + _X_FIT, _X_FIT)
+        e = min(b - 1, n - _X_FIT - 2)  # the last simulated sample is s + length
+        if e - s >= 2:
+            starts.append(s)
+            lengths.append(e - s)
+    return Segments(np.array(starts, dtype=np.int64), np.array(lengths, dtype=np.int64))
 
 
 def _line(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
