@@ -46,7 +46,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 rclpy.init()
-node = Node("rogue")
+node = Node(sys.argv[1] if len(sys.argv) > 1 else "rogue")
 try:
     pub = node.create_publisher(JointState, "/pneu/linear/valve_command", 10)
 except Exception as err:
@@ -160,7 +160,7 @@ def _runner_x() -> np.ndarray:
 
 def _bag_x(out: Path) -> np.ndarray:
     data = read_run(out / "run.mcap")
-    return np.asarray([m.position[0] for m in data["/pneu/linear/joint_state"].objects])
+    return np.asarray(data["/pneu/linear/joint_state"]["position"]).reshape(-1)
 
 
 def test_a_secured_graph_takes_no_command_from_an_unauthenticated_process(tmp_path, keystore):
@@ -176,7 +176,12 @@ def test_a_secured_graph_takes_no_command_from_an_unauthenticated_process(tmp_pa
 def test_another_enclaves_credentials_cannot_publish_a_valve_command(tmp_path, keystore):
     env = _env(True, keystore, enclave("rotary_controller"))
     res = subprocess.run(
-        [sys.executable, "-c", _ROGUE], capture_output=True, text=True, env=env, timeout=120
+        # named as the enclave's node, so the node itself may start; its publisher may not
+        [sys.executable, "-c", _ROGUE, "rotary_controller"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
     )
     assert "publisher refused" in res.stdout, res.stdout + res.stderr
 

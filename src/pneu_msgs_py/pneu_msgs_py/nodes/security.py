@@ -20,6 +20,24 @@ from pneu_msgs_py.contract.security import ROLES, enclave, operator_enclave, pol
 
 __all__ = ["create", "POLICY_NAME"]
 
+
+def _curve_instances() -> None:
+    """sros2 (Jazzy) passes the curve *class* ``ec.SECP256R1`` to ``ec.generate_private_key``;
+    cryptography >= 43 wants an instance ("curve must be an EllipticCurve instance"). Give it
+    one (sros2._utilities calls ``ec.generate_private_key`` through the module attribute)."""
+    from cryptography.hazmat.primitives.asymmetric import ec
+
+    original = ec.generate_private_key
+    if getattr(original, "_pneu_shim", False):
+        return
+
+    def generate_private_key(curve, *args, **kwargs):
+        return original(curve() if isinstance(curve, type) else curve, *args, **kwargs)
+
+    generate_private_key._pneu_shim = True  # type: ignore[attr-defined]
+    ec.generate_private_key = generate_private_key
+
+
 POLICY_NAME = "pneu_policy.xml"
 
 
@@ -29,6 +47,7 @@ def create(keystore: pathlib.Path, operators: tuple[str, ...] = ()) -> list[str]
     An existing keystore keeps its CAs and enclaves' keys (so running nodes keep
     working); every enclave's permissions are signed again from today's policy.
     """
+    _curve_instances()
     keystore = pathlib.Path(keystore)
     paths = [enclave(r) for r in ROLES] + [operator_enclave(n) for n in operators]
     text = policy_xml(tuple(operators))
