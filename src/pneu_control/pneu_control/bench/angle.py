@@ -349,29 +349,8 @@ def summarise(bench: AngleBench, rows: Sequence[MoveRow | TaskRow]) -> dict[str,
                         "n_trips": sum(1 for r in sam if r.trip),
                     }
                 )
-    tasks: list[dict[str, Any]] = []
     task_rows = [r for r in rows if isinstance(r, TaskRow)]
-    for name in bench.tasks:
-        g = [r for r in task_rows if r.task == name]
-        nom = next(r for r in g if r.sample < 0)
-        sam = [r for r in g if r.sample >= 0]
-        entry = {
-            "task": name,
-            "plumbing": nom.plumbing,
-            "nominal_completed": nom.completed,
-            "nominal_completion_s": nom.completion_s,
-            "completed": _share(sum(r.completed for r in sam), len(sam)),
-            "completion_s": _band([r.completion_s if r.completed else math.inf for r in sam]),
-            "outcomes": sorted({r.outcome for r in sam}),
-        }
-        if name == SCREW_TASK:
-            pe = [r.path_error_max_mm for r in sam]
-            entry["nominal_path_error_max_mm"] = nom.path_error_max_mm
-            entry["path_error_max_mm"] = _band(pe)
-            entry["path_within_target"] = _share(
-                sum(v <= SCREW_TARGET_MM for v in _finite(pe)), len(sam)
-            )
-        tasks.append(entry)
+    tasks = [_task_entry(name, [r for r in task_rows if r.task == name]) for name in bench.tasks]
     return _clean(
         {
             "samples": bench.samples,
@@ -381,6 +360,29 @@ def summarise(bench: AngleBench, rows: Sequence[MoveRow | TaskRow]) -> dict[str,
             "tasks": tasks,
         }
     )
+
+
+def _task_entry(name: str, g: Sequence[TaskRow]) -> dict[str, Any]:
+    """One task over the nominal twin and the plants: completion, time, the screw's path."""
+    nom = next(r for r in g if r.sample < 0)
+    sam = [r for r in g if r.sample >= 0]
+    entry = {
+        "task": name,
+        "plumbing": nom.plumbing,
+        "nominal_completed": nom.completed,
+        "nominal_completion_s": nom.completion_s,
+        "completed": _share(sum(r.completed for r in sam), len(sam)),
+        "completion_s": _band([r.completion_s if r.completed else math.inf for r in sam]),
+        "outcomes": sorted({r.outcome for r in sam}),
+    }
+    if name == SCREW_TASK:
+        pe = [r.path_error_max_mm for r in sam]
+        entry["nominal_path_error_max_mm"] = nom.path_error_max_mm
+        entry["path_error_max_mm"] = _band(pe)
+        entry["path_within_target"] = _share(
+            sum(v <= SCREW_TARGET_MM for v in _finite(pe)), len(sam)
+        )
+    return entry
 
 
 def _clean(v: Any) -> Any:
