@@ -170,10 +170,10 @@ def test_an_input_inside_the_output_is_never_deleted_by_overwrite(tmp_path):
     out = tmp_path / "o"
     out.mkdir()
     wp = out / "metrics.json"
-    wp.write_text("0,0\n1,5\n")
+    wp.write_text("[[0, 0], [1, 5]]\n")  # waypoints as JSON: a .json file is read as such
     refused(*RUN, "--out", out, "--overwrite", "--reference", f"waypoints:file={wp}",
             field="--out", allowed="not inputs of the command")  # fmt: skip
-    assert wp.read_text() == "0,0\n1,5\n" and sorted(p.name for p in out.iterdir()) == [
+    assert wp.read_text() == "[[0, 0], [1, 5]]\n" and sorted(p.name for p in out.iterdir()) == [
         "metrics.json"
     ]
     task = out / "task_report.md"  # a task file named like one of pneu task's reports
