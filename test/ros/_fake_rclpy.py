@@ -460,6 +460,9 @@ class Node:
     def get_name(self):
         return self._name
 
+    def count_publishers(self, topic):
+        return 1  # this node's own: one driver or sim on the fake graph
+
     def count_subscribers(self, topic):
         return len(WORLD.subs[topic])
 

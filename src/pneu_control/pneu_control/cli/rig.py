@@ -82,6 +82,19 @@ def parse_hold(text: str) -> dict[str, float]:
     return out
 
 
+def _refuse_controller_options(args: argparse.Namespace) -> None:
+    """No controller runs (--hold holds every axis): its options would be silently ignored."""
+    for option, value in (("--controller", args.controller), ("--reference", args.reference),
+                          ("--set", args.set), ("--controllers", args.controllers)):  # fmt: skip
+        if value:
+            raise ParamError(
+                option,
+                value[0] if isinstance(value, list) else value,
+                f"only for an axis a controller runs on (--hold holds every axis of "
+                f"--axis {args.axis})",
+            )
+
+
 def run(args: argparse.Namespace) -> int:
     """``pneu rig``: the controllers in the driver's loop on ``--backend`` until the duration or a
     signal; the exit code."""
@@ -97,16 +110,8 @@ def run(args: argparse.Namespace) -> int:
     axes = ("linear", "rotary") if args.axis == "both" else (args.axis,)
     hold = parse_hold(args.hold)
     active = tuple(a for a in axes if a not in hold)
-    if not active:  # no controller runs: its options would be silently ignored
-        for option, value in (("--controller", args.controller), ("--reference", args.reference),
-                              ("--set", args.set), ("--controllers", args.controllers)):  # fmt: skip
-            if value:
-                raise ParamError(
-                    option,
-                    value[0] if isinstance(value, list) else value,
-                    f"only for an axis a controller runs on (--hold holds every axis of "
-                    f"--axis {args.axis})",
-                )
+    if not active:
+        _refuse_controller_options(args)
     claim = None
     if args.out is not None:
         claim = rig_dir(

@@ -118,6 +118,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="S",
         help="with --reference: the steady-state window's start, inside the run",
     )
+    _add_run_options(p)
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    """What each run of the sweep takes: parameters, plant, supervisor, figures."""
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument(
         "--controller",

@@ -364,6 +364,13 @@ def load_waypoints(
             if len(cells) != 2 or not all(cells):
                 raise ParamError(f"{key}[row {i + 1}]", row, "two columns t, value")
             rows.append((cells[0], cells[1]))
+    return _checked_rows(rows, key, file, min_step_s)
+
+
+def _checked_rows(
+    rows: list[tuple[object, object]], key: str, file: str, min_step_s: float
+) -> tuple[list[float], list[float]]:
+    """The waypoint rows as numbers: times increasing by a sample period, in the cap."""
     t: list[float] = []
     r: list[float] = []
     for i, (ti, ri) in enumerate(rows):

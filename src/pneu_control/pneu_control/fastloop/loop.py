@@ -51,11 +51,17 @@ from pneu_control.fastloop.supervisor import (
 )
 from pneu_driver import safety
 
+
 # each algorithm's state record extends the base one and is passed where the base is taken
 # (axis_update): by design, so numba's note on compiling it (one ~2 kB line) is not shown
-warnings.filterwarnings(
-    "ignore", r"(?s)Record\(.*has been considered a subtype", NumbaExperimentalFeatureWarning
-)
+def quiet_record_subtypes() -> None:
+    """Hide numba's note on record subtypes (installed at import)."""
+    warnings.filterwarnings(
+        "ignore", r"(?s)Record\(.*has been considered a subtype", NumbaExperimentalFeatureWarning
+    )
+
+
+quiet_record_subtypes()
 
 __all__ = ["closed_loop", "refresh_cache"]
 
