@@ -123,3 +123,54 @@ def test_exhaust_pressure_balances_the_silencer():
     lo = rp.exhaust_pressure(prm, 2.0e5, 50.0, kbar)
     hi = rp.exhaust_pressure(prm, 2.0e5, 120.0, kbar)
     assert p.ambient.p_a < lo < hi < 2.0e5  # faster motor, more swept flow, higher p_m2
+
+
+def test_exhaust_pressure_compiled_is_the_python_bisection():
+    """The compiled bisection gives the same bits as its Python source."""
+    prm = rp.replay_params(PlantParams())
+    kbar = rp.mean_vane_factor(prm)
+    rng = np.random.default_rng(4)
+    for p_m1, omega in zip(rng.uniform(0.9e5, 6e5, 200), rng.uniform(-50.0, 200.0, 200)):
+        fast = rp.exhaust_pressure(prm, p_m1, omega, kbar)
+        assert fast == rp._exhaust_pressure.py_func(prm, p_m1, omega, kbar)
+
+
+@pytest.mark.parametrize("axes", ["both", "linear", "rotary"])
+def test_segments_in_parallel_are_the_one_by_one_replays(axes):
+    """replay_segments (numba threads) returns, bit for bit, each segment's replay() in turn."""
+    p = PlantParams()
+    prm = rp.replay_params(p)
+    plant = Plant(p, seed=2)
+    plant.reset(x0=0.01)
+    rng = np.random.default_rng(5)
+    n = 3000
+    ul = 5.0 + np.repeat(rng.uniform(-1.2, 1.2, n // 50), 50)
+    ur = 5.5 + np.repeat(rng.uniform(-0.2, 0.5, n // 50), 50)
+    starts = np.array([0, 170, 900, 901, 2500])
+    lengths = np.array([170, 600, 0, 1400, 500])
+    states = []
+    for _ in starts:  # different start states: the plant moved on between them
+        plant.run(np.full(37, 5.6), np.full(37, 5.8))
+        states.append(plant._st.copy())
+    states = np.array(states)
+    pc = None
+    if axes == "rotary":
+        pc = np.column_stack([np.linspace(2e5, 3e5, n), np.linspace(3e5, 2e5, n)])
+        pc[1000:1010] = np.nan  # a lost sample keeps the previous values
+    batch = rp.replay_segments(states, prm, ul, ur, starts, lengths, axes, pc)
+    kept = states.copy()
+    one = [
+        rp.replay(
+            states[s].copy(),
+            prm,
+            ul[a : a + m],
+            ur[a : a + m],
+            axes,
+            None if pc is None else pc[a : a + m],
+        )
+        for s, (a, m) in enumerate(zip(starts, lengths))
+    ]
+    assert np.array_equal(batch, np.concatenate(one))
+    assert np.array_equal(states, kept)  # the start states are not modified
+    with pytest.raises(ValueError, match="inside the voltages"):
+        rp.replay_segments(states, prm, ul, ur, starts + 1000, lengths, axes, pc)

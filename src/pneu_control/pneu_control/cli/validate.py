@@ -1,4 +1,5 @@
-"""``pneu validate``: replay bags through a twin and report the fit per signal, with overlays."""
+"""``pneu validate``: replay bags through a twin and report the fit per signal and horizon, the
+residual diagnostics and a structural-mismatch warning, with an overlay figure per axis."""
 
 from __future__ import annotations
 
@@ -15,7 +16,15 @@ from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.yaml_file import from_option
 
 NAME = "validate"
-HELP = "replay bags through a twin (open loop on the recorded voltages, or closed loop) and report the fit %% per signal"
+HELP = (
+    "replay bags through a twin (open loop on the recorded voltages, restarted from the measured "
+    "state at several horizons; or closed loop) and report the fit %% per signal, the residual "
+    "diagnostics and a structural-mismatch warning"
+)
+MIN_HORIZON_S = MIN_DURATION_S  # ten samples: the fewest a signal is scored on
+HORIZON_S = 1.0  # = pneu_control.sysid.validate.HORIZON_S (not imported: the CLI loads fast)
+AXES = ("linear", "rotary")
+SIGNALS = ("x", "p_c1", "p_c2", "p_m1", "omega")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -23,16 +32,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bags", nargs="+", metavar="BAG")
     p.add_argument("--plant", default=None, metavar="FILE", help="plant.yaml (default: config/)")
     p.add_argument("--mode", choices=("open", "closed", "auto"), default="open",
-                   help="open: the recorded voltages (default); closed: the recorded controller "
-                   "or excitation again; auto: closed where the bag says what ran")  # fmt: skip
-    p.add_argument("--horizon", type=float, default=math.inf, metavar="S",
-                   help="open loop: restart from the measured state every S seconds, "
-                   "[0.01, 600] (default: never)")  # fmt: skip
+                   help="open (default): the recorded voltages, restarted from the measured "
+                   "state every 0.2, 1 and 5 s and never; closed: besides, the recorded "
+                   "controller or excitation again, judged; auto: closed where the bag says "
+                   "what ran")  # fmt: skip
+    p.add_argument("--horizon", type=float, default=HORIZON_S, metavar="S",
+                   help="the open-loop horizon judged (--min-fit, figures, diagnostics): "
+                   f"[0.01, 600] s, or inf: never restart (default: {HORIZON_S:g})")  # fmt: skip
     p.add_argument(
         "--out",
         default=None,
         metavar="DIR",
-        help="new or empty directory (or --overwrite): overlay figures and validate.json",
+        help="new or empty directory (or --overwrite): an overlay figure per bag and axis, "
+        "validate.json",
     )
     p.add_argument(
         "--overwrite",
@@ -40,10 +52,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="replace the outputs of a previous pneu validate in DIR",
     )
     p.add_argument("--min-fit", type=float, default=None, metavar="PCT",
-                   help="exit 1 if a held-out bag's signal fits below PCT (<= 100)")  # fmt: skip
-
-
-MIN_HORIZON_S = MIN_DURATION_S  # ten samples: the fewest a signal is scored on
+                   help="exit 1 if a held-out bag's signal fits below PCT (<= 100) at the "
+                   "judged horizon")  # fmt: skip
 
 
 def _used_by_identify(plant_file: str | None) -> set[str]:
@@ -62,8 +72,8 @@ def _used_by_identify(plant_file: str | None) -> set[str]:
         ) from None
 
 
-def _figure(i: int, bag: str) -> str:
-    return f"validate_{i:02d}_{Path(bag).parent.name}.png"
+def _figure(i: int, bag: str, axis: str) -> str:
+    return f"validate_{i:02d}_{Path(bag).parent.name}_{axis}.png"
 
 
 def _check_options(args: argparse.Namespace) -> None:
@@ -82,8 +92,8 @@ def _check_options(args: argparse.Namespace) -> None:
 
 
 def _validation(bag: str, plant, used: set[str], args: argparse.Namespace):
-    """The validation of one bag; refused (before anything is written) if nothing of it
-    could be compared."""
+    """The validation of one bag; refused (before anything is written) if no axis of it could
+    be compared."""
     from pneu_control.sysid.record import load_record
     from pneu_control.sysid.validate import validate_record
 
@@ -91,18 +101,45 @@ def _validation(bag: str, plant, used: set[str], args: argparse.Namespace):
     held = str(Path(rec.path).resolve()) not in used
     v = validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
     if not v.fits:  # refused before anything is written: nothing of it could be compared
-        raise ParamError(
-            "BAG",
-            bag,
-            f"a bag with a stretch to compare (mode {v.mode}: none here, "
-            + (next((n for n in rec.notes if "not used" in n), "") or "too few valid samples")
-            + (
-                "); try --horizon S (restart from the measured state every S s)"
-                if math.isinf(args.horizon) and v.mode == "open"
-                else ")"
-            ),
-        )
+        why = "; ".join(f"{a}: {av.reason}" for a, av in v.axes.items() if av.reason)
+        raise ParamError("BAG", bag, f"a bag with a stretch to compare (none here: {why})")
     return v
+
+
+def _print_report(results) -> None:
+    """The fits per bag and horizon; the axes not validated and why; the diagnostics; last, the
+    structural-mismatch warnings, one line each."""
+    from pneu_control.sysid.validate import horizon_label
+
+    print(
+        "| bag | held out | horizon | "
+        + " | ".join(f"fit {n} %" for n in SIGNALS)
+        + " | offsets (kPa) |"
+    )
+    print("|---|---|---|" + "---|" * len(SIGNALS) + "---|")
+    for v in results:
+        held = "yes" if v.held_out else "no (identify)"
+        for h in v.horizons:
+            fits, offs = {}, {}
+            for av in v.axes.values():
+                fits.update(av.fits.get(h, {}))
+                offs.update(av.offsets.get(h, {}))
+            cells = [f"{fits[n]:.1f}" if n in fits else "—" for n in SIGNALS]
+            label = horizon_label(h) + (" (judged)" if h == v.headline else "")
+            o = ", ".join(f"{k} {x / 1e3:+.2f}" for k, x in offs.items())
+            print(f"| {v.bag} | {held} | {label} | " + " | ".join(cells) + f" | {o} |")
+    for v in results:
+        for a, av in v.axes.items():
+            if not av.validated:
+                print(f"{v.bag}: {a} not validated: {av.reason}")
+                continue
+            for note in av.notes:
+                print(f"{v.bag}: {note}")
+            if av.diagnostics is not None:
+                print(f"\n{v.bag}, " + "\n".join(av.diagnostics.lines(warning=False)))
+    for v in results:
+        for w in v.warnings:
+            print(f"{v.bag}: {w}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -118,9 +155,9 @@ def run(args: argparse.Namespace) -> int:
     bags = resolve_bags(args.bags)
     claim = None
     if args.out:
-        names = ["validate.json", *(_figure(i, b) for i, b in enumerate(bags))]
+        figs = [_figure(i, b, a) for i, b in enumerate(bags) for a in AXES]
         claim = OutputDir(
-            args.out, names, overwrite=args.overwrite, inputs=[*bags, args.plant]
+            args.out, ["validate.json", *figs], overwrite=args.overwrite, inputs=[*bags, args.plant]
         ).check()
     with from_option("--plant" if args.plant else None):
         plant = load_plant(args.plant)
@@ -129,30 +166,15 @@ def run(args: argparse.Namespace) -> int:
     if claim is not None:
         with claim, signals.deferred():  # every file finished, whatever signal comes
             for i, (v, bag) in enumerate(zip(results, bags)):
-                name = _figure(i, bag)
-                plot_validation(v, claim.partial(name))
-                claim.publish(name)
-                v.figure = str(claim.final(name))
+                for a in AXES:
+                    name = _figure(i, bag, a)
+                    plot_validation(v, a, claim.partial(name))
+                    claim.publish(name)
+                    v.axes[a].figure = str(claim.final(name))
             write_report(results, claim.partial("validate.json"))
             claim.publish("validate.json")
-    names = ["x", "p_c1", "p_c2", "p_m1", "omega"]
-    print(
-        "| bag | held out | mode | "
-        + " | ".join(f"fit {n} %" for n in names)
-        + " | offsets (kPa) |"
-    )
-    print("|---|---|---|" + "---|" * len(names) + "---|")
-    worst = math.inf
-    for v in results:
-        cells = [f"{v.fits[n]:.1f}" if n in v.fits else "—" for n in names]
-        offs = ", ".join(f"{k} {x / 1e3:+.2f}" for k, x in v.offsets.items())
-        print(
-            f"| {v.bag} | {'yes' if v.held_out else 'no (identify)'} | {v.mode} | "
-            + " | ".join(cells)
-            + f" | {offs} |"
-        )
-        if v.held_out and v.fits:
-            worst = min(worst, min(v.fits.values()))
+    _print_report(results)
+    worst = min((min(v.fits.values()) for v in results if v.held_out and v.fits), default=math.inf)
     if not any(v.held_out for v in results):
         print(
             "warning: every bag was used by identify; a validation needs held-out bags",
@@ -160,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if claim is not None:
         print(
-            f"wrote {claim.path}/validate.json and {len(results)} overlay figure(s)",
+            f"wrote {claim.path}/validate.json and {len(AXES) * len(results)} overlay figures",
             file=sys.stderr,
         )
     if args.min_fit is not None and worst < args.min_fit:

@@ -18,8 +18,9 @@ Statistics at the optimum (linearised, Ljung's *System Identification*
 §9.3): cov = s² (JᵀJ)⁻¹ with s² = Σr²/(m − p), inflated by the residuals'
 integrated autocorrelation time (they are far from white: one 1 ms sample
 is not one independent observation); 95 % intervals ±1.96σ; the
-correlation matrix of the estimates, and every pair with |ρ| > 0.95 is
-reported as not separately identifiable from these bags.
+correlation matrix of the estimates, and every pair with |ρ| > 0.9 is
+reported: the two trade against each other (not separately identifiable
+from these bags).
 """
 
 from __future__ import annotations
@@ -39,9 +40,9 @@ __all__ = ["AxisFit", "FitOptions", "fit_axis"]
 _OFFSET_WIDTH = 5e3  # Pa: z = 1 is one Huba accuracy band
 # Huba 511: ±0.5 % FS = ±5 kPa; the bound allows 1.5x that, so an offset cannot
 # absorb what the supply pressure or the flow curve should explain
-_OFFSET_BOUND = 7.5e3  # Pa
+OFFSET_BOUND_PA = 7.5e3
 _PRESSURE_OF = {"linear": ("p_c1", "p_c2"), "rotary": ("p_m1",)}
-CORRELATED = 0.95
+CORRELATED = 0.9  # |ρ| above which two estimates trade against each other
 
 
 @dataclass(frozen=True)
@@ -234,7 +235,7 @@ class _Problem:
         dec = options.decimate
         self.meas = [{n: r.y[n][s.index][::dec] for n in self.signals} for r, s in used]
         self.pivot = _pivots(axis, base, self.params, used)
-        ob = _OFFSET_BOUND / _OFFSET_WIDTH
+        ob = OFFSET_BOUND_PA / _OFFSET_WIDTH
         self.lo = np.array([b[0] for b in bounds] + [-ob] * self.n_off)
         self.hi = np.array([b[1] for b in bounds] + [ob] * self.n_off)
 

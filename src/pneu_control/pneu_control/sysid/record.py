@@ -71,6 +71,9 @@ class Record:
     controllers: dict[str, dict] = field(default_factory=dict)  # a pneu run's controller params
     period_s: float = 1e-3
     notes: list[str] = field(default_factory=list)
+    # values derived from this record alone, kept for the replays (spools, measured segment
+    # starts: see pneu_control.sysid.shooting); never changes a result
+    memo: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n(self) -> int:

@@ -9,7 +9,7 @@ the pressures as a centred mean less their offsets, the encoder angle and
 the mean encoder speed around it, the motor exhaust pressure quasi-steady,
 the valve spools from one pass of the spool model over the recorded
 voltages) and runs open loop on the recorded voltages
-(:func:`pneu_sim.physics.replay.replay`). With an excitation design the cuts
+(:func:`pneu_sim.physics.replay.replay_segments`: every segment at once, in parallel). With an excitation design the cuts
 fall on its segment boundaries (the rig is at its calmest there: a pulse
 starts from rest and is replayed whole). ``segment_s`` = ∞ is a pure
 simulation from the first sample (MATLAB ``compare``'s default).
@@ -78,11 +78,14 @@ def _cuts(rec: Record, axis: str, segment_s: float) -> list[tuple[int, int]]:
 
 
 def segments_of(rec: Record, axis: str, segment_s: float) -> Segments:
-    """Segments of at most ``segment_s`` (∞: one from the first sample) fully inside
-    ``rec.valid[axis]``, with every compared sample finite."""
+    """Segments of at most ``segment_s`` fully inside ``rec.valid[axis]``, with every compared
+    sample finite; ``segment_s`` = ∞: one from the first sample of each stretch of such data
+    (the whole record when all of it is valid)."""
     ok = rec.valid[axis].copy()
     for name in AXIS_SIGNALS[axis]:
         ok &= np.isfinite(rec.y[name])
+    if math.isinf(segment_s):
+        return _stretches(ok)
     bad = np.concatenate(([0], np.cumsum(~ok)))
     keep = [
         (s, n)
@@ -93,6 +96,21 @@ def segments_of(rec: Record, axis: str, segment_s: float) -> Segments:
         np.array([s for s, _ in keep], dtype=np.int64),
         np.array([n for _, n in keep], dtype=np.int64),
     )
+
+
+def _stretches(ok: np.ndarray) -> Segments:
+    """One segment per run of ``ok`` samples: from _X_FIT samples into it (the start's line
+    fit) to its end, inside the record's margins; at least two samples."""
+    n = len(ok)
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], ok.astype(np.int8), [0]))))
+    starts, lengths = [], []
+    for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):  # run [a, b)
+        s = max(a + _X_FIT, _X_FIT)
+        e = min(b - 1, n - _X_FIT - 2)  # the last simulated sample is s + length
+        if e - s >= 2:
+            starts.append(s)
+            lengths.append(e - s)
+    return Segments(np.array(starts, dtype=np.int64), np.array(lengths, dtype=np.int64))
 
 
 def _line(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -110,10 +128,12 @@ def _mean(v: np.ndarray, default: float) -> float:
     return float(np.mean(v[m])) if m.any() else default
 
 
-def initial_states(
-    rec: Record, seg: Segments, offsets: dict[str, float], spools: dict[str, np.ndarray]
-) -> list[dict]:
-    """Measured state at each segment start (see the module docstring)."""
+def _measured_starts(rec: Record, seg: Segments) -> list[dict]:
+    """The sensors' state at each segment start, before any offset is taken off (computed once
+    per record and segmentation: it depends on nothing the fit moves)."""
+    key = ("starts", seg.starts.tobytes())
+    if key in rec.memo:
+        return rec.memo[key]
     T = rec.period_s
     tw = np.arange(-_X_FIT, _X_FIT + 1) * T
     out = []
@@ -127,18 +147,40 @@ def initial_states(
             {
                 "x": x0 if math.isfinite(x0) else 0.0,
                 "v": v0 if math.isfinite(v0) else 0.0,
-                "p_c1": _mean(y["p_c1"][pw], 2e5) - offsets.get("p_c1", 0.0),
-                "p_c2": _mean(y["p_c2"][pw], 2e5) - offsets.get("p_c2", 0.0),
-                "p_m1": _mean(y["p_m1"][pw], 1.01325e5) - offsets.get("p_m1", 0.0),
+                "p_c1": _mean(y["p_c1"][pw], 2e5),
+                "p_c2": _mean(y["p_c2"][pw], 2e5),
+                "p_m1": _mean(y["p_m1"][pw], 1.01325e5),
                 "theta": float(th0) if math.isfinite(th0) else 0.0,
                 "omega": om0,
                 "u_linear": float(rec.u["linear"][i0 - 1]),
                 "u_rotary": float(rec.u["rotary"][i0 - 1]),
-                "spool_linear": tuple(spools["linear"][i0]),
-                "spool_rotary": tuple(spools["rotary"][i0]),
             }
         )
+    rec.memo[key] = out
     return out
+
+
+def initial_states(
+    rec: Record, seg: Segments, offsets: dict[str, float], spools: dict[str, np.ndarray]
+) -> list[dict]:
+    """Measured state at each segment start (see the module docstring)."""
+    out = []
+    for i0, m in zip(seg.starts.tolist(), _measured_starts(rec, seg)):
+        s0 = dict(m)
+        for name in ("p_c1", "p_c2", "p_m1"):
+            s0[name] = m[name] - offsets.get(name, 0.0)
+        s0["spool_linear"] = tuple(spools["linear"][i0])
+        s0["spool_rotary"] = tuple(spools["rotary"][i0])
+        out.append(s0)
+    return out
+
+
+def _spools(rec: Record, prm: np.ndarray, axis: str) -> np.ndarray:
+    """:func:`pneu_sim.physics.replay.spool_trajectory` over the record, once per spool model."""
+    key = ("spools", axis, rp.spool_key(prm, axis))
+    if key not in rec.memo:
+        rec.memo[key] = rp.spool_trajectory(prm, axis, rec.u[axis])
+    return rec.memo[key]
 
 
 def simulate(
@@ -149,18 +191,15 @@ def simulate(
     sensors read them)."""
     prm = rp.replay_params(params)
     kbar = rp.mean_vane_factor(prm)
-    spools = {a: rp.spool_trajectory(prm, a, rec.u[a]) for a in ("linear", "rotary")}
+    spools = {a: _spools(rec, prm, a) for a in ("linear", "rotary")}
     states = initial_states(rec, seg, offsets, spools)
-    parts = []
-    ul, ur = rec.u["linear"], rec.u["rotary"]
     p_c = None
     if axes == "rotary":  # the seal torque reads the cylinder's pressures: feed the recorded ones
         p_c = np.column_stack([rec.y[c] - offsets.get(c, 0.0) for c in ("p_c1", "p_c2")])
-    for i0, n, s0 in zip(seg.starts.tolist(), seg.lengths.tolist(), states):
-        st = rp.replay_state(prm, params, kbar=kbar, **s0)
-        pc = None if p_c is None else p_c[i0 : i0 + n]
-        parts.append(rp.replay(st, prm, ul[i0 : i0 + n], ur[i0 : i0 + n], axes, pc))
-    sim = np.concatenate(parts) if parts else np.zeros((0, rp.N_REPLAY))
+    st = np.array([rp.replay_state(prm, params, kbar=kbar, **s0) for s0 in states])
+    sim = rp.replay_segments(
+        st, prm, rec.u["linear"], rec.u["rotary"], seg.starts, seg.lengths, axes, p_c
+    )
     out = {name: sim[:, _COL[name]] for name in SIGNALS}
     for name, off in offsets.items():
         out[name] = out[name] + off

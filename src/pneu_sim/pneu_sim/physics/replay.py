@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from pneu_sim.physics import kernel as k
 from pneu_sim.physics.pack import pack_params
@@ -40,8 +40,10 @@ __all__ = [
     "mean_vane_factor",
     "replay",
     "replay_params",
+    "replay_segments",
     "replay_state",
     "rod_torque",
+    "spool_key",
     "spool_trajectory",
 ]
 
@@ -53,12 +55,13 @@ AXES_CODE = {"both": 0, "linear": 1, "rotary": 2}
 
 
 @njit(cache=True)
-def _replay(st, prm, u_l, u_r, out, which, p_c):
+def _run(st, prm, u_l, u_r, i0, n, out, o0, which, p_c, feed):
+    """Periods i0 .. i0+n-1 of the voltages from ``st`` (in place) into rows o0 .. of ``out``."""
     nsub = int(prm[k.P_NSUB])
     h = prm[k.P_H]
     T = prm[k.P_T]
-    feed = which == 2 and p_c.shape[0] == u_l.shape[0]
-    for i in range(u_l.shape[0]):
+    for j in range(n):
+        i = i0 + j
         if feed:  # the held cylinder's pressures, as recorded (the seal torque reads them)
             if math.isfinite(p_c[i, 0]) and math.isfinite(p_c[i, 1]):
                 st[k.S_PC1] = p_c[i, 0]
@@ -75,12 +78,27 @@ def _replay(st, prm, u_l, u_r, out, which, p_c):
             if which != 1:
                 K = k.substep_rotary(st, prm, ur, h, K)
             st[k.S_T] += h
-        out[i, 0] = st[k.S_FP1]
-        out[i, 1] = st[k.S_FP2]
-        out[i, 2] = st[k.S_FPM1]
-        out[i, 3] = st[k.S_FX]
-        out[i, 4] = st[k.S_TH]
-        out[i, 5] = (st[k.S_TH] - th0) / T
+        r = o0 + j
+        out[r, 0] = st[k.S_FP1]
+        out[r, 1] = st[k.S_FP2]
+        out[r, 2] = st[k.S_FPM1]
+        out[r, 3] = st[k.S_FX]
+        out[r, 4] = st[k.S_TH]
+        out[r, 5] = (st[k.S_TH] - th0) / T
+
+
+@njit(cache=True)
+def _replay(st, prm, u_l, u_r, out, which, p_c):
+    feed = which == 2 and p_c.shape[0] == u_l.shape[0]
+    _run(st, prm, u_l, u_r, 0, u_l.shape[0], out, 0, which, p_c, feed)
+
+
+@njit(cache=True, parallel=True)
+def _replay_segments(states, prm, u_l, u_r, starts, lengths, rows, out, which, p_c):
+    feed = which == 2 and p_c.shape[0] == u_l.shape[0]
+    for s in prange(starts.shape[0]):  # the segments are independent: one per thread
+        st = states[s].copy()
+        _run(st, prm, u_l, u_r, starts[s], lengths[s], out, rows[s], which, p_c, feed)
 
 
 @njit(cache=True)
@@ -113,6 +131,15 @@ def spool_trajectory(prm: np.ndarray, axis: str, u: np.ndarray) -> np.ndarray:
     return out
 
 
+def spool_key(prm: np.ndarray, axis: str) -> bytes:
+    """Everything of ``prm`` :func:`spool_trajectory` reads for ``axis`` (the AO
+    quantisation, the substeps, the spool's ZOH and play): equal keys, equal trajectories."""
+    base = k.P_VALVE_L if axis == "linear" else k.P_VALVE_R
+    idx = [k.P_AOR, k.P_AOLSB, k.P_AONMAX, k.P_NSUB, base + k.VB_HW]
+    idx += list(range(base + k.VB_PHI11, base + k.VB_G2 + 1))
+    return prm[idx].tobytes()
+
+
 def replay_params(params: PlantParams) -> np.ndarray:
     """The kernel's parameter vector without sensor offsets (the replay has no noise)."""
     return pack_params(params, None)
@@ -132,6 +159,11 @@ def exhaust_pressure(prm: np.ndarray, p_m1: float, omega: float, kbar: float) ->
     ṁ_ex(p_m2 → p_a) (Eq. 11 through A_ex) sets it at a segment start.
     ``kbar``: :func:`mean_vane_factor`.
     """
+    return float(_exhaust_pressure(prm, float(p_m1), float(omega), float(kbar)))
+
+
+@njit(cache=True)
+def _exhaust_pressure(prm, p_m1, omega, kbar):
     pa = prm[k.P_PA]
     RT = prm[k.P_RT]
     base = k.P_VALVE_R
@@ -139,7 +171,7 @@ def exhaust_pressure(prm: np.ndarray, p_m1: float, omega: float, kbar: float) ->
     lo, hi = pa, max(pa, p_m1)
     if hi <= pa:
         return pa
-    for _ in range(60):
+    for _ in range(60):  # bisection
         mid = 0.5 * (lo + hi)
         inflow = kbar * max(omega, 0.0) * p_m1 / RT + prm[k.P_KLK] * (p_m1 - mid)
         out = k.iso_flow(mid, pa, prm[k.P_KEX], b, bl)[0]
@@ -255,4 +287,44 @@ def replay(
         raise ValueError("p_c: an (n, 2) array of chamber pressures, with axes='rotary' only")
     out = np.empty((u_l.shape[0], N_REPLAY))
     _replay(st, prm, u_l, u_r, out, AXES_CODE[axes], pc)
+    return out
+
+
+def replay_segments(
+    states: np.ndarray,
+    prm: np.ndarray,
+    u_linear: np.ndarray,
+    u_rotary: np.ndarray,
+    starts: np.ndarray,
+    lengths: np.ndarray,
+    axes: str = "both",
+    p_c: np.ndarray | None = None,
+) -> np.ndarray:
+    """:func:`replay` of many segments at once, in parallel (numba threads; each segment's
+    arithmetic is :func:`replay`'s, so the rows are the same bits).
+
+    Segment s starts from ``states[s]`` (not modified) at period ``starts[s]`` of the
+    full-record voltages ``u_linear``/``u_rotary`` and runs ``lengths[s]`` periods;
+    ``p_c``: the full record's chamber pressures (as in :func:`replay`, ``axes="rotary"``
+    only). Returns the segments' rows one after the other: (Σ lengths, 6).
+    """
+    u_l = np.ascontiguousarray(u_linear, dtype=np.float64)
+    u_r = np.ascontiguousarray(u_rotary, dtype=np.float64)
+    if u_l.shape != u_r.shape or u_l.ndim != 1:
+        raise ValueError("u_linear and u_rotary must be 1-D arrays of equal length")
+    if axes not in AXES_CODE:
+        raise ValueError(f"axes: {axes!r} refused; allowed: one of {', '.join(AXES_CODE)}")
+    st = np.ascontiguousarray(states, dtype=np.float64).reshape(-1, k.N_STATE)
+    i0 = np.ascontiguousarray(starts, dtype=np.int64)
+    n = np.ascontiguousarray(lengths, dtype=np.int64)
+    if not (st.shape[0] == i0.shape[0] == n.shape[0]) or (
+        len(n) and (i0.min() < 0 or n.min() < 0 or (i0 + n).max() > u_l.shape[0])
+    ):
+        raise ValueError("states, starts, lengths: one per segment, inside the voltages")
+    pc = np.zeros((0, 2)) if p_c is None else np.ascontiguousarray(p_c, dtype=np.float64)
+    if p_c is not None and (axes != "rotary" or pc.shape != (u_l.shape[0], 2)):
+        raise ValueError("p_c: an (n, 2) array of chamber pressures, with axes='rotary' only")
+    rows = np.concatenate(([0], np.cumsum(n)[:-1])).astype(np.int64) if len(n) else n
+    out = np.empty((int(n.sum()), N_REPLAY))
+    _replay_segments(st, prm, u_l, u_r, i0, n, rows, out, AXES_CODE[axes], pc)
     return out
