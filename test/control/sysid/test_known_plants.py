@@ -106,4 +106,8 @@ def test_held_out_validation_fit(case):
         k: round(v, 1) for k, v in fits.items() if v < MIN_FIT_EXCEPTIONS.get((name, k), MIN_FIT)
     }
     assert not low, f"held-out fit below {MIN_FIT} %: {low}"
-    assert len(list((out / "val").glob("*.png"))) == 2
+    # one overlay per bag and axis validated (both bags excite both axes)
+    pngs = sorted(p.name for p in (out / "val").glob("*.png"))
+    assert len(pngs) == 2 * len(rows) and all(
+        any(p.endswith(f"_{ax}.png") for p in pngs) for ax in ("linear", "rotary")
+    ), pngs
