@@ -102,7 +102,9 @@ def _validation(bag: str, plant, used: set[str], args: argparse.Namespace):
     v = validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
     if not v.fits:  # refused before anything is written: nothing of it could be compared
         why = "; ".join(f"{a}: {av.reason}" for a, av in v.axes.items() if av.reason)
-        raise ParamError("BAG", bag, f"a bag with a stretch to compare (none here: {why})")
+        raise ParamError(
+            "BAG", bag, f"a bag with a stretch to compare, as long as --horizon (none here: {why})"
+        )
     return v
 
 

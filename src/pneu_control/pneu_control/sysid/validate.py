@@ -346,11 +346,10 @@ def _validate_axis(
             av.y = ys
         pieces[h] = diagnostics.Piece(rec, seg, sim)
     if not av.fits:
-        why = "; ".join(av.notes) or "too few valid samples"
-        av.reason = (
-            "no stretch of valid data as long as the shortest horizon "
-            f"({horizon_label(horizon_key(min(horizons)))}): {why}"
-        )
+        # each note's head only (its detail is in the notes): one line for the refusal
+        heads = (n.removeprefix(f"{axis}: ").split(": ")[0] for n in av.notes)
+        why = "; ".join(heads) or "too few valid samples"
+        av.reason = f"no valid stretch of {horizon_label(horizon_key(min(horizons)))}: {why}"
         return av
     # the diagnostics judge the headline's residuals (a pure simulation, one segment per
     # stretch, gives the sign-flip test nothing to flip: then the longest finite horizon's)
