@@ -35,6 +35,7 @@ algorithm that reads it.
 
 from __future__ import annotations
 
+import math
 from typing import Any, NamedTuple, Protocol
 
 from pneu_msgs_py.params.records import Record, RecordType
@@ -48,9 +49,24 @@ __all__ = [
     "NO_TABLE",
     "STEP_INPUT",
     "StepInput",
+    "deviation_band",
+    "samples",
 ]
 
 NAN = float("nan")
+
+
+def samples(t: float, T: float) -> int:
+    """A duration as a whole number of samples, rounded up (an exact multiple stays)."""
+    return int(math.ceil(t / T - 1e-9))
+
+
+def deviation_band(params: Any) -> dict[str, float]:
+    """The command's band as a deviation from neutral (V): ``lo``/``hi`` of the constants."""
+    lim = params.limits
+    return {"lo": lim.u_min - lim.u_neutral, "hi": lim.u_max - lim.u_neutral}
+
+
 MAX_HISTORY = 6  # transport_delay_samples <= 5 (AxisControllerParams): d + 1 commands
 
 # One sample's input to an algorithm (paper units), a kernel record (DESIGN §12),

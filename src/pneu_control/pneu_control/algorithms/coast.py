@@ -75,9 +75,22 @@ from typing import TYPE_CHECKING
 from pneu_msgs_py.params.core import param
 from pneu_msgs_py.params.records import RecordType, kernel
 
-from pneu_control.algorithms.base import NAN, AlgorithmKernel, KernelAlgorithm
+from pneu_control.algorithms.angle_law import (
+    DEG_PER_S_PER_RPM,
+    pulse_step_field,
+    still_field,
+    tick,
+    to_phase,
+)
+from pneu_control.algorithms.base import (
+    NAN,
+    AlgorithmKernel,
+    KernelAlgorithm,
+    deviation_band,
+    samples,
+)
 from pneu_control.algorithms.smc import NONNEGATIVE, POSITIVE, omega_0_field
-from pneu_control.observers.eso import eso3_step, eso_gains
+from pneu_control.observers.eso import eso3_constants, eso3_observe
 
 if TYPE_CHECKING:
     from pneu_control.controller.params import AxisControllerParams
@@ -85,7 +98,6 @@ if TYPE_CHECKING:
 __all__ = ["COAST_CONSTANTS", "COAST_STATE", "Coast", "CoastParams", "OVERSHOOT_CODES"]
 
 OVERSHOOT_CODES = {"reapproach": 0, "fault": 1, "hold": 2}
-DEG_PER_S_PER_RPM = 6.0  # 1 rpm = 360°/60 s
 TWIN = "estimated on the twin (nominal plant, paper plumbing): "
 
 
@@ -225,12 +237,9 @@ class CoastParams:
         source=TWIN + "with 1.5 × breakaway friction a 5.8 V pulse vented 2 ms before the "
         "breakaway steps 1.5° against 4.3° vented at it",
     )
-    pulse_step_deg: float = param(
+    pulse_step_deg: float = pulse_step_field(
         2.0,
-        unit="°",
-        desc="d_min: first estimate of the smallest pulse step (learnt)",
-        **POSITIVE,
-        source=TWIN + "0.8–1.4° at 5.8 V with J_m, M_c, V_m1 over their bands, 2.5–4.3° "
+        TWIN + "0.8–1.4° at 5.8 V with J_m, M_c, V_m1 over their bands, 2.5–4.3° "
         "with 1.3–1.5 × breakaway friction: 2° errs neither way by much before the first pulse",
     )
     pulse_x0_s: float = param(
@@ -256,12 +265,10 @@ class CoastParams:
         hi=1.0,
         source="the d(x) fit errs by ≈ ±25 % (estimated on the twin)",
     )
-    still_s: float = param(
+    still_s: float = still_field(
         0.015,
-        unit="s",
-        desc="n_still T: stopped once the encoder is unchanged this long",
-        **POSITIVE,
-        source="one count (0.09°) in 15 ms is 6 °/s, gone in 20 µs at a_c",
+        "stopped once the encoder is unchanged this long",
+        "one count (0.09°) in 15 ms is 6 °/s, gone in 20 µs at a_c",
     )
     vent_s: float = param(
         0.02,
@@ -358,12 +365,6 @@ def coast_hint(c, s):
 
 
 @kernel
-def _to(s, phase):
-    s.phase = phase
-    s.k_phase = 0
-
-
-@kernel
 def _learn(c, s, y):
     """A coast has ended at rest at y: correct κ (after a drive) or d_min (after a pulse)."""
     dist = y - s.coast_th
@@ -399,7 +400,7 @@ def _decide(c, s, inp, y):
             s.fault = 1
     small = e < c.rho * s.d_min and e <= c.e_over  # no smaller step, and already in the band
     if s.fault != 0 or e < -c.e_over or e <= c.tol or small:
-        _to(s, PHASE_SETTLED)
+        to_phase(s, PHASE_SETTLED)
     elif e <= c.e_pulse:
         x = c.x0 * (math.sqrt(c.a_p * e / s.d_min) - 1.0)
         if s.n_pulses == 0:
@@ -407,9 +408,9 @@ def _decide(c, s, inp, y):
         s.x_hold = 0.0 if x < 0.0 else (c.x_max if x > c.x_max else math.floor(x + 0.5))
         s.k_break = -1
         s.coast_th = y
-        _to(s, PHASE_PULSE)
+        to_phase(s, PHASE_PULSE)
     else:
-        _to(s, PHASE_DRIVE)
+        to_phase(s, PHASE_DRIVE)
 
 
 @kernel
@@ -426,7 +427,7 @@ def _drive(c, s, inp, y):
         s.coast_from = FROM_DRIVE
         s.coast_w = w
         s.coast_th = y
-        _to(s, PHASE_COAST)
+        to_phase(s, PHASE_COAST)
         return c.lo
     w_r = inp.r_dot + c.k_e * e
     w_r = c.w_min if w_r < c.w_min else (c.w_max if w_r > c.w_max else w_r)
@@ -443,12 +444,7 @@ def _drive(c, s, inp, y):
 def _law(c, s, inp):
     """The command (deviation, V) for this sample (module docstring)."""
     y = inp.y
-    if y != s.y_last:
-        s.k_still = 0
-        s.y_last = y
-    else:
-        s.k_still += 1
-    s.k_phase += 1
+    tick(s, y)
     if s.phase == PHASE_COAST and s.k_still >= c.n_still and s.k_phase >= c.n_vent:
         _learn(c, s, y)
         _decide(c, s, inp, y)
@@ -468,7 +464,7 @@ def _law(c, s, inp):
             s.k_break < 0 and s.k_phase >= s.t_on + s.x_hold  # t_on ≤ n_break
         ):
             s.coast_from = FROM_PULSE  # vented: the breakaway may still come in the vent lag
-            _to(s, PHASE_COAST)
+            to_phase(s, PHASE_COAST)
         else:
             s.u_raw = s.pulse_du
             return s.pulse_du
@@ -493,7 +489,7 @@ def coast_start(c, s, table, inp, u_prev, h0, h1, h2):
     s.y_last = inp.y
     s.k_still = 0
     s.coast_from = FROM_NONE
-    _to(s, PHASE_COAST)  # vent first: the law acts from rest (a running motor coasts down)
+    to_phase(s, PHASE_COAST)  # vent first: the law acts from rest (a running motor coasts down)
     return _law(c, s, inp)
 
 
@@ -502,16 +498,8 @@ def coast_update(c, s, table, inp):
     u_applied = inp.u_applied
     s.u_in = u_applied
     u_drive = u_applied if u_applied > 0.0 else 0.0  # a vented inlet drives nothing
-    z3 = s.z3
-    z1, z2, z3 = eso3_step(s.z1, s.z2, z3, z3 + c.b0 * u_drive, inp.y, c.T, c.T2h, c.l1, c.l2, c.l3)
-    s.z1 = z1
-    s.z2 = z2
-    s.z3 = z3
+    eso3_observe(c, s, s.z3 + c.b0 * u_drive, inp.y)
     return _law(c, s, inp)
-
-
-def _samples(t: float, T: float) -> int:
-    return int(math.ceil(t / T - 1e-9))
 
 
 class Coast(KernelAlgorithm):
@@ -524,15 +512,9 @@ class Coast(KernelAlgorithm):
     def constants(self, params: AxisControllerParams, axis: str):
         p = params.coast
         T = params.sample_time_s
-        l1, l2, l3 = eso_gains(p.omega_0, T)
-        lim = params.limits
         return COAST_CONSTANTS.new(
-            T=T,
-            T2h=0.5 * T * T,
+            **eso3_constants(p.omega_0, T),
             b0=p.b_0,
-            l1=l1,
-            l2=l2,
-            l3=l3,
             w_max=p.speed_max_rpm * DEG_PER_S_PER_RPM,
             w_min=p.speed_min_rpm * DEG_PER_S_PER_RPM,
             k_e=p.position_gain,
@@ -548,21 +530,20 @@ class Coast(KernelAlgorithm):
             e_pulse=p.pulse_max_deg,
             du_p0=p.pulse_du,
             du_step=p.pulse_du_step,
-            n_break=_samples(p.pulse_break_s, T),
-            n_lead=_samples(p.pulse_lead_s, T),
+            n_break=samples(p.pulse_break_s, T),
+            n_lead=samples(p.pulse_lead_s, T),
             d_min0=p.pulse_step_deg,
             x0=p.pulse_x0_s / T,
-            x_max=float(_samples(p.pulse_hold_max_s, T)),
+            x_max=float(samples(p.pulse_hold_max_s, T)),
             a_p=p.pulse_aim,
-            n_still=_samples(p.still_s, T),
-            n_vent=_samples(p.vent_s, T),
+            n_still=samples(p.still_s, T),
+            n_vent=samples(p.vent_s, T),
             kp=p.kp,
             ki=p.ki,
             i_max=p.integral_max,
             u_ff=p.u_ff,
             u_0=p.u_start,
-            lo=lim.u_min - lim.u_neutral,
-            hi=lim.u_max - lim.u_neutral,
+            **deviation_band(params),
             overshoot=OVERSHOOT_CODES[p.overshoot],
         )
 

@@ -63,7 +63,7 @@ from pneu_msgs_py.contract.units import RPM_PER_RAD_S
 from pneu_msgs_py.params.core import param
 from pneu_msgs_py.params.records import RecordType, kernel
 
-from pneu_control.algorithms.base import AlgorithmKernel, KernelAlgorithm
+from pneu_control.algorithms.base import AlgorithmKernel, KernelAlgorithm, deviation_band
 from pneu_control.algorithms.smc import (
     NONNEGATIVE,
     POSITIVE,
@@ -78,7 +78,7 @@ from pneu_control.algorithms.smc import (
     reaching_command,
     sliding_surface,
 )
-from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predict3
+from pneu_control.observers.eso import eso3_constants, eso3_observe, extrapolate, predict3
 
 if TYPE_CHECKING:
     from pneu_control.controller.params import AxisControllerParams
@@ -224,14 +224,8 @@ def eso_smc_update(c, s, table, inp):
     T = c.T
     u_applied = inp.u_applied
     s.u_in = u_applied
-    z3 = s.z3
     # ESO, Eq. 18 discretised (pneu_control.observers.eso), f_k held
-    z1, z2, z3 = eso3_step(
-        s.z1, s.z2, z3, z3 + c.b0 * u_applied + s.f_k, inp.y, T, c.T2h, c.l1, c.l2, c.l3
-    )
-    s.z1 = z1
-    s.z2 = z2
-    s.z3 = z3
+    z1, z2, z3 = eso3_observe(c, s, s.z3 + c.b0 * u_applied + s.f_k, inp.y)
     r = inp.r
     r_dot = inp.r_dot
     r_ddot = inp.r_ddot
@@ -274,28 +268,22 @@ class EsoSmc(KernelAlgorithm):
         p = params.eso_smc
         T = params.sample_time_s
         lam = p.lambda_r
-        l1, l2, l3 = eso_gains(p.omega_0, T)
         lim = params.limits
         return ESO_SMC_CONSTANTS.new(
-            T=T,
-            T2h=0.5 * T * T,
+            **eso3_constants(p.omega_0, T),
             c1=2.0 * lam,  # coefficient of e in s (Eq. 26 fixed)
             c2=lam * lam,  # coefficient of ∫e
             b0=p.b_0,
             eps=p.epsilon,
             delta=p.delta,
             k=p.k,
-            l1=l1,
-            l2=l2,
-            l3=l3,
             fs=RPM_PER_RAD_S / p.J_m,  # (rpm/s) per (N·m): M_f / J_m in the angle model
             M_c=p.M_c,
             M_v=p.M_v,
             fv=RPM_PER_RAD_S * p.M_v / p.J_m,  # 1/s
             fc=RPM_PER_RAD_S * p.M_c / (p.J_m * p.coulomb_smoothing),  # 1/s
             inv_ws=1.0 / p.coulomb_smoothing,
-            lo=lim.u_min - lim.u_neutral,
-            hi=lim.u_max - lim.u_neutral,
+            **deviation_band(params),
             tau=params.transport_delay_samples * T,
             u_n=lim.u_neutral,
             aw=int(p.integral_anti_windup),

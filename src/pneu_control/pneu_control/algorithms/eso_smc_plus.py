@@ -154,7 +154,7 @@ from pneu_control.algorithms.valve_curve import (
     valve_constants,
     valve_table,
 )
-from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predict3
+from pneu_control.observers.eso import eso3_observe, eso_gains, extrapolate, predict3
 from pneu_control.observers.eso_chain import chain_gains, eso4_step, predict4
 
 if TYPE_CHECKING:
@@ -312,14 +312,9 @@ def law_force(c, s, inp, F_p, integrate):
 
 @kernel
 def update_force(c, s, table, inp):
-    T = c.T
     # 3-state ESO on the laser with the measured acceleration as known input:
     # ẍ = f + (F_p − F_f(ẋ))/M  (f: sensor offsets, static friction, model error)
-    z3 = s.z3
-    z1, z2, z3 = eso3_step(s.z1, s.z2, z3, z3 + s.a_in, inp.y, T, c.T2h, c.l1, c.l2, c.l3)
-    s.z1 = z1
-    s.z2 = z2
-    s.z3 = z3
+    z2 = eso3_observe(c, s, s.z3 + s.a_in, inp.y)[1]
     F_p = pressure_force(c, inp.p_c1, inp.p_c2)
     if not (-1e300 < F_p < 1e300):  # no pressures this sample: hold the last one
         F_p = s.F_p
@@ -467,11 +462,7 @@ def plus_update(c, s, table, inp):
         for i in range(c.n_ff - 1):
             ffp[i] = ffp[i + 1]
     # 3-state ESO (Eq. 18, exact ZOH current observer, pneu_control.observers.eso)
-    z3 = s.z3
-    z1, z2, z3 = eso3_step(s.z1, s.z2, z3, z3 + b0 * v_in, inp.y, T, c.T2h, c.l1, c.l2, c.l3)
-    s.z1 = z1
-    s.z2 = z2
-    s.z3 = z3
+    z1, z2, z3 = eso3_observe(c, s, s.z3 + b0 * v_in, inp.y)
     r = inp.r
     r_dot = inp.r_dot
     r_ddot = inp.r_ddot

@@ -24,14 +24,14 @@ from typing import TYPE_CHECKING
 from pneu_msgs_py.params.core import param
 from pneu_msgs_py.params.records import RecordType, kernel
 
-from pneu_control.algorithms.base import AlgorithmKernel, KernelAlgorithm
+from pneu_control.algorithms.base import AlgorithmKernel, KernelAlgorithm, deviation_band
 from pneu_control.algorithms.smc import (
     POSITIVE,
     b_0_field,
     delay_compensation_field,
     omega_0_field,
 )
-from pneu_control.observers.eso import eso3_step, eso_gains, extrapolate, predict3
+from pneu_control.observers.eso import eso3_constants, eso3_observe, extrapolate, predict3
 
 if TYPE_CHECKING:
     from pneu_control.controller.params import AxisControllerParams
@@ -99,12 +99,8 @@ def ladrc_update(c, s, table, inp):
     T = c.T
     u_applied = inp.u_applied
     s.u_in = u_applied
-    z3 = s.z3
     # ESO, Eq. 18 discretised (pneu_control.observers.eso)
-    z1, z2, z3 = eso3_step(s.z1, s.z2, z3, z3 + c.b0 * u_applied, inp.y, T, c.T2h, c.l1, c.l2, c.l3)
-    s.z1 = z1
-    s.z2 = z2
-    s.z3 = z3
+    z1, z2, z3 = eso3_observe(c, s, s.z3 + c.b0 * u_applied, inp.y)
     r = inp.r
     r_dot = inp.r_dot
     r_ddot = inp.r_ddot
@@ -127,20 +123,14 @@ class Ladrc(KernelAlgorithm):
     def constants(self, params: AxisControllerParams, axis: str):
         p = params.ladrc
         T = params.sample_time_s
-        l1, l2, l3 = eso_gains(p.omega_0, T)
         lim = params.limits
         return LADRC_CONSTANTS.new(
-            T=T,
-            T2h=0.5 * T * T,
+            **eso3_constants(p.omega_0, T),
             kp=p.lambda_1 * p.lambda_1,
             kd=2.0 * p.lambda_1,
             b0=p.b_0,
             ff=1.0 if p.accel_feedforward else 0.0,
-            l1=l1,
-            l2=l2,
-            l3=l3,
-            lo=lim.u_min - lim.u_neutral,
-            hi=lim.u_max - lim.u_neutral,
+            **deviation_band(params),
             tau=params.transport_delay_samples * T,
             u_n=lim.u_neutral,
             dc=int(p.delay_compensation and params.transport_delay_samples > 0),

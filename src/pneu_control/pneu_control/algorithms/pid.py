@@ -26,7 +26,12 @@ from typing import TYPE_CHECKING
 from pneu_msgs_py.params.core import param
 from pneu_msgs_py.params.records import RecordType, kernel
 
-from pneu_control.algorithms.base import NAN, AlgorithmKernel, KernelAlgorithm
+from pneu_control.algorithms.base import (
+    NAN,
+    AlgorithmKernel,
+    KernelAlgorithm,
+    deviation_band,
+)
 from pneu_control.algorithms.smc import NONNEGATIVE, POSITIVE
 
 if TYPE_CHECKING:
@@ -165,7 +170,6 @@ class Pid(KernelAlgorithm):
     def constants(self, params: AxisControllerParams, axis: str):
         p = params.pid
         T = params.sample_time_s
-        lim = params.limits
         return PID_CONSTANTS.new(
             T=T,
             kp=p.kp,
@@ -174,8 +178,7 @@ class Pid(KernelAlgorithm):
             a_d=math.exp(-T / p.tf),
             a_y=1.0 - math.exp(-T / p.y_filter_tf) if p.y_filter_tf > 0.0 else 1.0,
             kb=T / p.tt,
-            lo=lim.u_min - lim.u_neutral,
-            hi=lim.u_max - lim.u_neutral,
+            **deviation_band(params),
             on_error=int(p.derivative_on == "error"),
             aw=AW_CODES[p.anti_windup],
         )

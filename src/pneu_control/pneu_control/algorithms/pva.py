@@ -72,7 +72,20 @@ from pneu_msgs_py.contract.valve_chart import MPYE_DU_V, MPYE_FLOW
 from pneu_msgs_py.params.core import param
 from pneu_msgs_py.params.records import RecordType, kernel
 
-from pneu_control.algorithms.base import NAN, AlgorithmKernel, KernelAlgorithm
+from pneu_control.algorithms.angle_law import (
+    DEG_PER_S_PER_RPM,
+    pulse_step_field,
+    still_field,
+    tick,
+    to_phase,
+)
+from pneu_control.algorithms.base import (
+    NAN,
+    AlgorithmKernel,
+    KernelAlgorithm,
+    deviation_band,
+    samples,
+)
 from pneu_control.algorithms.smc import NONNEGATIVE, POSITIVE, omega_0_field
 from pneu_control.algorithms.valve_curve import (
     VALVE_FIELDS,
@@ -88,7 +101,6 @@ if TYPE_CHECKING:
 
 __all__ = ["PVA_CONSTANTS", "PVA_STATE", "Pva", "PvaParams"]
 
-DEG_PER_S_PER_RPM = 6.0  # 1 rpm = 360°/60 s
 VALVE_UNIT_V = 1.0  # the chart's unit point: v = u at 1 V (b0 per linearised volt)
 SEARCH = "chosen by the seeded search on the twin (module docstring): "
 TWIN = "estimated on the twin (nominal plant, bidirectional plumbing): "
@@ -200,12 +212,10 @@ class PvaParams:
         **POSITIVE,
         source="twice tol (estimated: no hunting between hold and pulse)",
     )
-    still_s: float = param(
+    still_s: float = still_field(
         0.008,
-        unit="s",
-        desc="n_still T: at rest once the encoder is unchanged this long",
-        **POSITIVE,
-        source="one count (0.09°) in 8 ms is 11 °/s, gone in 0.1 ms at the friction's "
+        "at rest once the encoder is unchanged this long",
+        "one count (0.09°) in 8 ms is 11 °/s, gone in 0.1 ms at the friction's "
         "≈ 1.4e5 °/s² (M_c/J_m, paper Table 1)",
     )
     move_s: float = param(
@@ -299,12 +309,9 @@ class PvaParams:
         hi=1.0,
         source="the step's spread over the vane angle (estimated: aims short)",
     )
-    pulse_step_deg: float = param(
+    pulse_step_deg: float = pulse_step_field(
         0.9,
-        unit="°",
-        desc="d_min: first estimate of the smallest pulse step (learnt)",
-        **POSITIVE,
-        source=TWIN + "0.9° with static_ratio 1.5, less below",
+        TWIN + "0.9° with static_ratio 1.5, less below",
     )
 
 
@@ -341,12 +348,6 @@ def pva_hint(c, s):
 
 
 @kernel
-def _to(s, phase):
-    s.phase = phase
-    s.k_phase = 0
-
-
-@kernel
 def profile(c, e):
     """(ω_p, ω_p'): the planned speed for the remaining angle e and its slope (docstring)."""
     ae = e if e >= 0.0 else -e
@@ -365,7 +366,7 @@ def _enter_move(s):
     s.k_near = 0
     s.rev = 0
     s.w_sign = 0.0
-    _to(s, PHASE_MOVE)
+    to_phase(s, PHASE_MOVE)
 
 
 @kernel
@@ -384,7 +385,7 @@ def _start_pulse(c, s, e, y):
         if extra > 0.0:
             du += extra / c.slope
     s.du_now = c.hi if du > c.hi else du
-    _to(s, PHASE_PULSE)
+    to_phase(s, PHASE_PULSE)
 
 
 @kernel
@@ -392,7 +393,7 @@ def _decide(c, s, e, y):
     """At rest: hold, a pulse or a move (module docstring)."""
     ae = e if e >= 0.0 else -e
     if ae <= c.tol:
-        _to(s, PHASE_HOLD)
+        to_phase(s, PHASE_HOLD)
     elif ae <= c.e_pulse:
         _start_pulse(c, s, e, y)
     else:
@@ -455,12 +456,7 @@ def _move(c, s, table, inp, e):
 def _law(c, s, table, inp):
     """The command (deviation, V) for this sample (module docstring)."""
     y = inp.y
-    if y != s.y_last:
-        s.k_still = 0
-        s.y_last = y
-    else:
-        s.k_still += 1
-    s.k_phase += 1
+    tick(s, y)
     e = inp.r - y
     ae = e if e >= 0.0 else -e
     still = s.k_still >= c.n_still
@@ -483,10 +479,10 @@ def _law(c, s, table, inp):
             b0 = 2.0 * s.b0_eff
             s.b0_eff = 8.0 * c.b0 if b0 > 8.0 * c.b0 else b0
             s.p_dir = 0.0
-            _to(s, PHASE_PAUSE)
+            to_phase(s, PHASE_PAUSE)
         elif s.k_near >= c.n_app:  # circling the target: hold 5 V, let it stop, then pulse
             s.p_dir = 0.0
-            _to(s, PHASE_PAUSE)
+            to_phase(s, PHASE_PAUSE)
     elif ph == PHASE_HOLD:
         if ae > c.tol_out and still:
             _decide(c, s, e, y)
@@ -495,7 +491,7 @@ def _law(c, s, table, inp):
             _learn(c, s, y)
             _decide(c, s, e, y)
     elif ph == PHASE_PULSE and s.k_phase >= 2 * c.n_on:
-        _to(s, PHASE_PAUSE)
+        to_phase(s, PHASE_PAUSE)
     ph = s.phase
     if ph == PHASE_MOVE:
         u = _move(c, s, table, inp, e)
@@ -546,7 +542,7 @@ def pva_start(c, s, table, inp, u_prev, h0, h1, h2):
     s.k_near = 0
     s.rev = 0
     s.w_sign = 0.0
-    _to(s, PHASE_MOVE)
+    to_phase(s, PHASE_MOVE)
     return _law(c, s, table, inp)
 
 
@@ -554,10 +550,6 @@ def pva_start(c, s, table, inp, u_prev, h0, h1, h2):
 def pva_update(c, s, table, inp):
     _observe(c, s, table, inp)
     return _law(c, s, table, inp)
-
-
-def _samples(t: float, T: float) -> int:
-    return int(math.ceil(t / T - 1e-9))
 
 
 class Pva(KernelAlgorithm):
@@ -575,7 +567,6 @@ class Pva(KernelAlgorithm):
         p = params.pva
         T = params.sample_time_s
         l1, l2, l3, l4 = chain_gains(4, p.omega_0, T)
-        lim = params.limits
         a = p.decel
         k = p.position_gain
         return PVA_CONSTANTS.new(
@@ -600,22 +591,21 @@ class Pva(KernelAlgorithm):
             ka=p.accel_gain,
             tol=p.tolerance_deg,
             tol_out=p.release_deg,
-            n_still=_samples(p.still_s, T),
-            n_move=_samples(p.move_s, T),
-            n_app=_samples(p.approach_s, T),
+            n_still=samples(p.still_s, T),
+            n_move=samples(p.move_s, T),
+            n_app=samples(p.approach_s, T),
             e_app=p.approach_deg,
             n_rev=p.reversals,
             w_rev=p.reversal_rpm * DEG_PER_S_PER_RPM,
             e_pulse=p.pulse_max_deg,
-            n_on=max(1, _samples(p.pulse_on_s, T)),
+            n_on=max(1, samples(p.pulse_on_s, T)),
             du_p0=p.pulse_du,
             du_step=p.pulse_du_step,
-            n_pause=_samples(p.pulse_pause_s, T),
+            n_pause=samples(p.pulse_pause_s, T),
             slope=p.pulse_slope,
             aim=p.pulse_aim,
             d_min0=p.pulse_step_deg,
-            lo=lim.u_min - lim.u_neutral,
-            hi=lim.u_max - lim.u_neutral,
+            **deviation_band(params),
             **valve_constants(MPYE_DU_V, MPYE_FLOW, VALVE_UNIT_V),
         )
 

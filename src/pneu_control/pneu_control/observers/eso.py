@@ -34,7 +34,16 @@ import math
 
 from pneu_msgs_py.params.records import kernel
 
-__all__ = ["eso_gains", "eso_error_matrix", "eso3_step", "predict3", "extrapolate", "LinearEso"]
+__all__ = [
+    "eso_gains",
+    "eso3_constants",
+    "eso_error_matrix",
+    "eso3_step",
+    "eso3_observe",
+    "predict3",
+    "extrapolate",
+    "LinearEso",
+]
 
 
 def eso_gains(omega_0: float, T: float) -> tuple[float, float, float]:
@@ -44,6 +53,12 @@ def eso_gains(omega_0: float, T: float) -> tuple[float, float, float]:
     p = math.exp(-omega_0 * T)
     q = 1.0 - p
     return 1.0 - p * p * p, 3.0 * q * q * (1.0 + p) / (2.0 * T), q * q * q / (T * T)
+
+
+def eso3_constants(omega_0: float, T: float) -> dict[str, float]:
+    """The fields :func:`eso3_observe` reads from an algorithm's constants: T, T²/2, L_d."""
+    l1, l2, l3 = eso_gains(omega_0, T)
+    return {"T": T, "T2h": 0.5 * T * T, "l1": l1, "l2": l2, "l3": l3}
 
 
 def eso_error_matrix(omega_0: float, T: float) -> list[list[float]]:
@@ -77,6 +92,18 @@ def eso3_step(
     z2p = z2 + T * acc
     ey = y - z1p
     return z1p + l1 * ey, z2p + l2 * ey, z3 + l3 * ey
+
+
+@kernel
+def eso3_observe(c, s, acc: float, y: float) -> tuple[float, float, float]:
+    """:func:`eso3_step` on an algorithm's records: the constants ``c`` (T, T2h, l1..l3, as
+    :func:`eso3_constants`) and the state ``s`` (z1..z3, updated); returns (z1, z2, z3).
+    ``acc`` = z3 + b0 u + f_k as the caller models it (its rounding is the caller's)."""
+    z1, z2, z3 = eso3_step(s.z1, s.z2, s.z3, acc, y, c.T, c.T2h, c.l1, c.l2, c.l3)
+    s.z1 = z1
+    s.z2 = z2
+    s.z3 = z3
+    return z1, z2, z3
 
 
 @kernel
