@@ -9,7 +9,7 @@ Every axis of the rig gets a result: its fits, or one line saying why not
 The measure (default, ``open``): the twin on the recorded valve voltages,
 re-started from the measured state (:mod:`pneu_control.sysid.shooting`)
 every h of :data:`HORIZONS_S` -- multi-step prediction at several horizons
-(Ljung, *System Identification*, 2nd ed., §16.6) -- and, h = ∞, a pure
+(Ljung, *System Identification*, 2nd ed., sec. 16.6) -- and, h = ∞, a pure
 simulation from the first sample of each stretch of valid data (MATLAB
 ``compare``'s default). The headline (``horizon_s``, default
 :data:`HORIZON_S` = 1 s, what ``--min-fit`` judges and the figures show)
