@@ -77,6 +77,7 @@ from pneu_control.algorithms.smc import (
     omega_0_field,
     reaching_command,
     sliding_surface,
+    surface_step,
 )
 from pneu_control.observers.eso import eso3_constants, eso3_observe, extrapolate, predict3
 
@@ -233,20 +234,14 @@ def eso_smc_update(c, s, table, inp):
         z1, z2 = predict3(z1, z2, z3, inp.history, inp.n_hist, c.u_n, c.b0, s.f_k, T, c.T2h)
         r, r_dot = extrapolate(r, r_dot, r_ddot, c.tau)
     # sliding surface, Eq. 26 (fixed: double pole at −λ)
-    e = r - z1
-    ed = r_dot - z2
-    integral = s.integral + T * e
-    c1 = c.c1
-    c2 = c.c2
-    sv = sliding_surface(e, ed, integral, c1, c2)
-    s.s = sv
+    e, ed, integral, sv = surface_step(c, s, r, r_dot, z1, z2)
     if c.fric:
         f_k = friction_term(c, z1, z2)
         s.f_k = f_k
     else:
         f_k = 0.0
     # Eq. 30/31 (fixed): ṡ = −ε sat(s)  (Eq. 29)
-    u = (reaching_command(sv, e, ed, r_ddot, c1, c2, c.eps, c.delta, c.k) - z3 - f_k) / c.b0
+    u = (reaching_command(sv, e, ed, r_ddot, c.c1, c.c2, c.eps, c.delta, c.k) - z3 - f_k) / c.b0
     s.u_raw = u
     if c.aw:  # conditional integration (see module docstring)
         s.integral = conditional_integral(s.integral, integral, e, u, sv, c.lo, c.hi, c.delta)

@@ -143,8 +143,8 @@ from pneu_control.algorithms.eso_smc_plus_params import EsoSmcPlusParams
 from pneu_control.algorithms.smc import (
     conditional_integral,
     reaching_command,
-    sat,
     sliding_surface,
+    surface_step,
 )
 from pneu_control.algorithms.valve_curve import (
     VALVE_FIELDS,
@@ -284,14 +284,8 @@ def law_force(c, s, inp, F_p, integrate):
     r_dot = inp.r_dot
     r_ddot = inp.r_ddot
     # outer loop: Eq. 26–30 on ẍ, asking for an acceleration a_d
-    e = r - z1
-    ed = r_dot - z2
-    integral = s.integral + T * e
-    c1 = c.c1
-    c2 = c.c2
-    sv = sliding_surface(e, ed, integral, c1, c2)
-    s.s = sv
-    a_d = reaching_command(sv, e, ed, r_ddot, c1, c2, c.eps, c.delta, c.k) - z3
+    e, ed, integral, sv = surface_step(c, s, r, r_dot, z1, z2)
+    a_d = reaching_command(sv, e, ed, r_ddot, c.c1, c.c2, c.eps, c.delta, c.k) - z3
     # desired piston force (Eq. 1 with the Eq. 2 friction of the reference speed)
     F_r = c.M_k * r_ddot + friction(c, r_dot)  # the reference's own force
     F_d = F_r + c.M_k * (a_d - r_ddot)
@@ -415,9 +409,9 @@ def plus_start(c, s, table, inp, u_prev, h0, h1, h2):
         ed = r_dot - z2
         integral = 0.0 if cold else -(ed + c1 * e) / c2
         s.integral = integral
-        sv = ed + c1 * e + c2 * integral
+        sv = sliding_surface(e, ed, integral, c1, c2)
         s.s = sv
-        v = (c.eps * sat(sv, c.delta, c.k) + r_ddot + c1 * ed + c2 * e - z3) / b0
+        v = (reaching_command(sv, e, ed, r_ddot, c1, c2, c.eps, c.delta, c.k) - z3) / b0
         return plus_out(c, s, table, v)
     w_r, wd_r, wdd_r = speed_ref(c, r, r_dot, r_ddot)
     th = inp.theta
@@ -439,9 +433,9 @@ def plus_start(c, s, table, inp, u_prev, h0, h1, h2):
     e = 0.0 if cold else -(edd + c1 * ed) / c2
     s.th_r = th + e
     s.w_r_prev = w_r
-    sv = edd + c1 * ed + c2 * e
+    sv = sliding_surface(ed, edd, e, c1, c2)
     s.s = sv
-    v = (c.eps * sat(sv, c.delta, c.k) + wdd_r + c1 * edd + c2 * ed - z4) / b0
+    v = (reaching_command(sv, ed, edd, wdd_r, c1, c2, c.eps, c.delta, c.k) - z4) / b0
     return plus_out(c, s, table, v)
 
 
@@ -470,14 +464,8 @@ def plus_update(c, s, table, inp):
         hist, u_n = model_history(c, s, table, inp)
         z1, z2 = predict3(z1, z2, z3, hist, inp.n_hist, u_n, b0, 0.0, T, c.T2h)
         r, r_dot = extrapolate(r, r_dot, r_ddot, c.tau)
-    e = r - z1
-    ed = r_dot - z2
-    integral = s.integral + T * e
-    c1 = c.c1
-    c2 = c.c2
-    sv = ed + c1 * e + c2 * integral  # Eq. 26 (fixed)
-    s.s = sv
-    v = (c.eps * sat(sv, c.delta, c.k) + r_ddot + c1 * ed + c2 * e - z3) / b0  # Eq. 30
+    e, ed, integral, sv = surface_step(c, s, r, r_dot, z1, z2)  # Eq. 26 (fixed)
+    v = (reaching_command(sv, e, ed, r_ddot, c.c1, c.c2, c.eps, c.delta, c.k) - z3) / b0  # Eq. 30
     if ffw:
         # friction feed-forward through the pressure rate: u_ff = dF_f(ṙ)/dt / b_F (Eq. 2)
         F_r = friction(c, r_dot)

@@ -53,6 +53,19 @@ def sliding_surface(e: float, ed: float, integral: float, c1: float, c2: float) 
 
 
 @kernel
+def surface_step(c, s, r: float, r_dot: float, z1: float, z2: float):
+    """Eq. 26 on the observer's estimates: (e, ė, ∫e after this sample, s), with s stored in
+    the state ``s.s``; whether the integral is kept is the caller's (conditional integration).
+    Reads ``c.T``, ``c.c1``, ``c.c2`` and ``s.integral``."""
+    e = r - z1
+    ed = r_dot - z2
+    integral = s.integral + c.T * e
+    sv = sliding_surface(e, ed, integral, c.c1, c.c2)
+    s.s = sv
+    return e, ed, integral, sv
+
+
+@kernel
 def reaching_command(
     sv: float, e: float, ed: float, r_ddot: float, c1: float, c2: float,
     eps: float, delta: float, k: float,
