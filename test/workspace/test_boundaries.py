@@ -39,10 +39,7 @@ KNOWN_CYCLES: dict[str, set[tuple[str, str]]] = {
 }
 # Private names still imported across modules, in folders being rewritten elsewhere:
 # (importing module, imported module, name).
-KNOWN_PRIVATE: set[tuple[str, str, str]] = {
-    ("pneu_msgs_py.bag.decode", "pneu_msgs_py.contract.convert", "_typestore"),
-    ("pneu_msgs_py.bag.writer", "pneu_msgs_py.contract.convert", "_typestore"),
-}
+KNOWN_PRIVATE: set[tuple[str, str, str]] = set()
 
 MAX_FUNCTION_LINES = 80
 # Longer functions still to split: (module, function); remove an entry when it is split. The

@@ -244,9 +244,13 @@ class ChannelDecoder:
 
     def _objects(self, data, offs, sizes, log_t, pub_t) -> Piece:
         """Variable-layout types: deserialize each message with the rosbags typestore."""
-        from pneu_msgs_py.contract.convert import _typestore, diag_statuses_from_msg, stamp_to_ns
+        from pneu_msgs_py.contract.convert import (
+            diag_statuses_from_msg,
+            jazzy_typestore,
+            stamp_to_ns,
+        )
 
-        ts = _typestore()
+        ts = jazzy_typestore()
         objs = []
         stamps = np.zeros(len(offs), dtype=np.int64)
         for i, (o, s) in enumerate(zip(offs.tolist(), sizes.tolist())):

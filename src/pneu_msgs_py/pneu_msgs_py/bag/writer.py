@@ -40,7 +40,7 @@ from pneu_msgs_py.bag.chunks import Batch, merge_same_channel, records
 from pneu_msgs_py.bag.container import COMPRESSIONS, McapContainer
 from pneu_msgs_py.bag.errors import BagWriteError
 from pneu_msgs_py.bag.rosbag2_meta import rosbag2_metadata
-from pneu_msgs_py.contract.convert import DiagStatus, _typestore, diagnostics_to_typestore
+from pneu_msgs_py.contract.convert import DiagStatus, diagnostics_to_typestore, jazzy_typestore
 from pneu_msgs_py.contract.qos import MODES
 from pneu_msgs_py.contract.samples import AXES, SensorSample
 from pneu_msgs_py.contract.topics import (
@@ -274,7 +274,7 @@ class BagWriter:
     def write_diagnostics(self, stamp_ns: int, statuses: Sequence[DiagStatus]) -> None:
         """``/diagnostics`` (low rate; encoded with the rosbags Jazzy typestore)."""
         self._check_open()
-        ts = _typestore()
+        ts = jazzy_typestore()
         msg = diagnostics_to_typestore(stamp_ns, statuses)
         data = bytes(ts.serialize_cdr(msg, "diagnostic_msgs/msg/DiagnosticArray"))
         self.write_serialized(

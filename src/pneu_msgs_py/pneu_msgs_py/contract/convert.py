@@ -46,6 +46,7 @@ __all__ = [
     "fill_sensor_joint_states",
     "sample_to_values",
     "typestore_messages",
+    "jazzy_typestore",
     "sample_to_typestore",
     "command_to_typestore",
     "controller_state_to_typestore",
@@ -346,7 +347,7 @@ def diag_statuses_from_msg(msg: Any) -> list[DiagStatus]:
 
 
 @cache
-def _typestore() -> Any:
+def jazzy_typestore() -> Any:
     """The rosbags Jazzy typestore (created once, on first use)."""
     from rosbags.typesys import Stores, get_typestore
 
@@ -355,7 +356,7 @@ def _typestore() -> Any:
 
 def typestore_messages() -> Any:
     """The rosbags Jazzy typestore, created once on first use (one instance for every user)."""
-    return _typestore()
+    return jazzy_typestore()
 
 
 def _np_array(values: Sequence[float]) -> Any:
@@ -366,7 +367,7 @@ def _np_array(values: Sequence[float]) -> Any:
 
 def _ts_new(ros_type: str) -> Any:
     """An empty rosbags message of ``ros_type`` (fields zero / empty)."""
-    ts = _typestore()
+    ts = jazzy_typestore()
     T = ts.types
     time = T["builtin_interfaces/msg/Time"]
     header = T["std_msgs/msg/Header"]
@@ -447,7 +448,7 @@ def joint_trajectory_to_typestore(
 
 def diagnostics_to_typestore(stamp_ns: int, statuses: Sequence[DiagStatus]) -> Any:
     """A DiagnosticArray as a rosbags object."""
-    T = _typestore().types
+    T = jazzy_typestore().types
     return fill_diagnostic_array(
         _ts_new("diagnostic_msgs/msg/DiagnosticArray"),
         lambda: T["diagnostic_msgs/msg/DiagnosticStatus"](
