@@ -254,6 +254,20 @@ def rod_torque(
     return min(abs(kbar * (p_m1 - p_m2)), T_seal + prm[k.P_TLS])
 
 
+def _inputs(u_linear, u_rotary, axes: str, p_c):
+    """The voltages and the recorded chamber pressures as contiguous arrays, checked."""
+    u_l = np.ascontiguousarray(u_linear, dtype=np.float64)
+    u_r = np.ascontiguousarray(u_rotary, dtype=np.float64)
+    if u_l.shape != u_r.shape or u_l.ndim != 1:
+        raise ValueError("u_linear and u_rotary must be 1-D arrays of equal length")
+    if axes not in AXES_CODE:
+        raise ValueError(f"axes: {axes!r} refused; allowed: one of {', '.join(AXES_CODE)}")
+    pc = np.zeros((0, 2)) if p_c is None else np.ascontiguousarray(p_c, dtype=np.float64)
+    if p_c is not None and (axes != "rotary" or pc.shape != (u_l.shape[0], 2)):
+        raise ValueError("p_c: an (n, 2) array of chamber pressures, with axes='rotary' only")
+    return u_l, u_r, pc
+
+
 def replay(
     st: np.ndarray,
     prm: np.ndarray,
@@ -276,15 +290,7 @@ def replay(
     :data:`R_PC2`, :data:`R_PM1` (Pa abs), :data:`R_X` (m), :data:`R_TH`
     (rad), :data:`R_OM` (rad/s, mean over the period).
     """
-    u_l = np.ascontiguousarray(u_linear, dtype=np.float64)
-    u_r = np.ascontiguousarray(u_rotary, dtype=np.float64)
-    if u_l.shape != u_r.shape or u_l.ndim != 1:
-        raise ValueError("u_linear and u_rotary must be 1-D arrays of equal length")
-    if axes not in AXES_CODE:
-        raise ValueError(f"axes: {axes!r} refused; allowed: one of {', '.join(AXES_CODE)}")
-    pc = np.zeros((0, 2)) if p_c is None else np.ascontiguousarray(p_c, dtype=np.float64)
-    if p_c is not None and (axes != "rotary" or pc.shape != (u_l.shape[0], 2)):
-        raise ValueError("p_c: an (n, 2) array of chamber pressures, with axes='rotary' only")
+    u_l, u_r, pc = _inputs(u_linear, u_rotary, axes, p_c)
     out = np.empty((u_l.shape[0], N_REPLAY))
     _replay(st, prm, u_l, u_r, out, AXES_CODE[axes], pc)
     return out
@@ -308,12 +314,7 @@ def replay_segments(
     ``p_c``: the full record's chamber pressures (as in :func:`replay`, ``axes="rotary"``
     only). Returns the segments' rows one after the other: (Σ lengths, 6).
     """
-    u_l = np.ascontiguousarray(u_linear, dtype=np.float64)
-    u_r = np.ascontiguousarray(u_rotary, dtype=np.float64)
-    if u_l.shape != u_r.shape or u_l.ndim != 1:
-        raise ValueError("u_linear and u_rotary must be 1-D arrays of equal length")
-    if axes not in AXES_CODE:
-        raise ValueError(f"axes: {axes!r} refused; allowed: one of {', '.join(AXES_CODE)}")
+    u_l, u_r, pc = _inputs(u_linear, u_rotary, axes, p_c)
     st = np.ascontiguousarray(states, dtype=np.float64).reshape(-1, k.N_STATE)
     i0 = np.ascontiguousarray(starts, dtype=np.int64)
     n = np.ascontiguousarray(lengths, dtype=np.int64)
@@ -321,9 +322,6 @@ def replay_segments(
         len(n) and (i0.min() < 0 or n.min() < 0 or (i0 + n).max() > u_l.shape[0])
     ):
         raise ValueError("states, starts, lengths: one per segment, inside the voltages")
-    pc = np.zeros((0, 2)) if p_c is None else np.ascontiguousarray(p_c, dtype=np.float64)
-    if p_c is not None and (axes != "rotary" or pc.shape != (u_l.shape[0], 2)):
-        raise ValueError("p_c: an (n, 2) array of chamber pressures, with axes='rotary' only")
     rows = np.concatenate(([0], np.cumsum(n)[:-1])).astype(np.int64) if len(n) else n
     out = np.empty((int(n.sum()), N_REPLAY))
     _replay_segments(st, prm, u_l, u_r, i0, n, rows, out, AXES_CODE[axes], pc)
