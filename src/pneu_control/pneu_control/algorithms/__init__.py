@@ -4,9 +4,13 @@ Each module holds one algorithm and its parameter group; :mod:`.smc` what the
 sliding-mode laws share, :mod:`.valve_curve` the MPYE flow linearisation.
 To add an algorithm: a module with ``XParams`` (a frozen dataclass of
 :func:`pneu_msgs_py.params.core.param` fields) and a class implementing
-:class:`.base.Algorithm`; register both below and in
+:class:`.base.Algorithm`, the documented way a :class:`.base.KernelAlgorithm` (its
+steps kernels on records, DESIGN §12); register both below and in
 :class:`pneu_control.controller.params.AxisControllerParams` (a field named
-after it, and its name in ``ALGORITHMS``).
+after it, and its name in ``ALGORITHMS``). It then runs in every Python path; the
+compiled loop runs it once its name is in :data:`pneu_control.fastloop.layout.COMPILED`
+with a branch in ``fastloop/axis.py``'s dispatch, and until then a run of it falls back
+to the Python runner, saying so in one line.
 """
 
 from __future__ import annotations
