@@ -298,6 +298,14 @@ class _Publisher:
     def get_subscription_count(self):
         return len(WORLD.subs[self.topic])
 
+    def wait_for_all_acked(self, timeout=None):
+        return True  # one FIFO queue delivers every message before any published later
+
+
+class Duration:
+    def __init__(self, *, seconds=0.0, nanoseconds=0):
+        self.nanoseconds = int(seconds * 1e9) + nanoseconds
+
 
 class _Subscription:
     def __init__(self, msg_type, topic, cb, raw):
@@ -574,6 +582,7 @@ def _modules() -> dict[str, types.ModuleType]:
         ),
         "rclpy.task": mod("rclpy.task", Future=Future),
         "rclpy.clock": mod("rclpy.clock", Clock=Clock, ClockType=ClockType),
+        "rclpy.duration": mod("rclpy.duration", Duration=Duration),
         "rclpy.parameter_client": mod(
             "rclpy.parameter_client", AsyncParameterClient=AsyncParameterClient
         ),

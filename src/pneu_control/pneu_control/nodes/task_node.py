@@ -36,6 +36,7 @@ from pneu_msgs_py.params.core import ParamError
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy import qos as rq
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, JointState
@@ -43,6 +44,10 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from pneu_control.nodes.task_core import TaskShellCore
+
+# lockstep: how long a trajectory may take to reach every subscriber's reader (a machine
+# far slower than that has other problems; the run goes on, warned and counted)
+ACK_TIMEOUT_S = 5.0
 
 
 class TaskRunnerNode(ShellDefaults, Node):
@@ -72,6 +77,7 @@ class TaskRunnerNode(ShellDefaults, Node):
         mode = g["mode"]
         self.core = TaskShellCore(prepared, lockstep=mode == "lockstep", autostart=g["autostart"])
         self.done = Future()
+        self.n_unacked = 0
         self.traj_pub = self.create_publisher(
             JointTrajectory, TRAJECTORY_TOPIC, to_rclpy(qos_for(TRAJECTORY_TOPIC, mode), rq)
         )
@@ -156,6 +162,8 @@ class TaskRunnerNode(ShellDefaults, Node):
             self.traj_pub.publish(
                 fill_trajectory(JointTrajectory(), JointTrajectoryPoint, stamp, names, points)
             )
+        if trajectories and self.core.lockstep:
+            self._wait_delivered()
         if progress:
             self.progress_pub.publish(
                 fill_diagnostic_array(
@@ -171,6 +179,20 @@ class TaskRunnerNode(ShellDefaults, Node):
                     self.get_logger().info(p.to_status().message)
         if self.core.finished and not self.done.done():
             self._finish()
+
+    def _wait_delivered(self) -> None:
+        """Lockstep: the trajectory in every subscriber's reader before the progress that lets
+        the sim go on. A long trajectory is many DDS fragments; on a busy machine one lost
+        and repaired by a NACK takes longer than START_DELAY_S of lockstep samples, and the
+        controller would join it late (a run unlike ``pneu task``). The ack is the DDS
+        reader's (reliable QoS), not the controller's callback: that runs before the next
+        sample's (events in arrival order) or within START_DELAY_S (a wait set)."""
+        if not self.traj_pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S)):
+            self.n_unacked += 1
+            self.get_logger().warning(
+                f"trajectory not acknowledged by every subscriber in {ACK_TIMEOUT_S:g} s "
+                f"({self.n_unacked} so far): a controller may join it late"
+            )
 
     def _status(self) -> None:
         s = self.core.last
