@@ -17,7 +17,11 @@ the Jazzy shape (ros2/demos ``talker.py``) plus what a rig needs:
 4. always: the executor is shut down (EventsExecutor must stop before its
    nodes go), ``node.safe_shutdown()`` leaves the rig safe and files complete
    -- with a second SIGINT ignored meanwhile (under ``ros2 launch`` a Ctrl-C
-   can reach a node twice) -- then the node is destroyed and rclpy shut down.
+   can reach a node twice) -- then the node is destroyed and rclpy shut down. In a
+   node's own process (its console script, :func:`node_entry`) SIGINT stays ignored from
+   then on: a node that ended by itself as ``ros2 launch`` ends the run gets launch's
+   SIGINT while the interpreter exits, and a KeyboardInterrupt there kills the process
+   by the signal (launch: "process has died, exit code -2" after a clean run).
 
 rclpy is imported inside the functions: this module imports without ROS.
 """
@@ -122,6 +126,10 @@ def make_executor(kind: str) -> tuple[Any, str]:
     return SingleThreadedExecutor(), "single"
 
 
+# set by node_entry: this process is the node's own (module docstring, step 4)
+_OWN_PROCESS = False
+
+
 def node_entry(module: str, func: str = "main") -> Callable[..., int]:
     """A console script's main that imports the node's ``module`` under a Ctrl-C guard.
 
@@ -138,6 +146,8 @@ def node_entry(module: str, func: str = "main") -> Callable[..., int]:
             target = getattr(importlib.import_module(module), func)
         except KeyboardInterrupt:
             return 0
+        global _OWN_PROCESS
+        _OWN_PROCESS = True
         return target(args)
 
     main.__name__ = main.__qualname__ = f"{module.rsplit('.', 1)[-1]}_{func}"
@@ -208,5 +218,6 @@ def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | No
                 n.destroy_node()
             rclpy.try_shutdown()
         finally:
-            signal.signal(signal.SIGINT, previous or signal.default_int_handler)
+            if not _OWN_PROCESS:  # in a test's process: its handler back
+                signal.signal(signal.SIGINT, previous or signal.default_int_handler)
     return code
