@@ -53,7 +53,7 @@ BIDIRECTIONAL_ROTARY: dict[str, Any] = {"algorithm": "pva"}
 PAPER_ROTARY: dict[str, Any] = {"algorithm": "coast"}
 # the rod's law: a task holds positions against loads (a stem's pull, a spring, a thrust).
 # The MPYE's flow chart is progressive (1 % of the flow at 0.36 V from centre, 7 % at 1 V,
-# 40 % at 2.1 V: a local slope 3-4x the 1 V secant beyond 1.2 V), so a law with one b0
+# 40 % at 2.1 V: a local slope 3-5x the 1 V secant beyond 1.2 V), so a law with one b0
 # (identified with ±1 V steps) has several times its design gain once a load step drives
 # the command out, where the loop with its 1 ms transport delay and the valve's and the
 # laser's lags does not settle: after the task's 60 N step every law of controllers.yaml
@@ -133,9 +133,8 @@ def prepare(
         defaults = rotary_defaults(effective) if axis == "rotary" else linear_defaults()
         if "algorithm" in overrides:
             defaults = {k: v for k, v in defaults.items() if k != "algorithm"}
-        overrides = {**defaults, **overrides}
-        if axis == "rotary":
-            overrides["rotary_control"] = "angle"
+        forced = {"rotary_control": "angle"} if axis == "rotary" else {}
+        overrides = {**defaults, **overrides, **forced}
         overrides.setdefault("reference.kind", "constant")
         overrides.setdefault("reference.value", 0.0)
         with from_option("--controllers" if controllers_file else None):
