@@ -347,6 +347,55 @@ def test_a_vented_inlet_reading_the_sensor_floor_is_not_frozen():
         assert ("rotary", "stuck") in rules(r.sup.events(), ERROR)
 
 
+def _volts_with_chambers(r, v_c1, v_c2):
+    """Raw volts of tick r.k + 1: the chambers at v_c1, v_c2 (None: live), inlet and laser live."""
+    w = 1e-4 * ((r.k + 1) % 2)
+    return (2.0 + w if v_c1 is None else v_c1, 1.5 - w if v_c2 is None else v_c2, 3.0 + w, 2.5 + w)
+
+
+def test_a_vented_chamber_reading_the_sensor_floor_is_not_frozen():
+    """A rod held against a load near the cylinder's force keeps the other chamber vented:
+    p_c2 at 0 V while valve #1 vents chamber 2 (above 5 V + the band), or p_c1 while it vents
+    chamber 1 (below 5 V − the band), is no frozen sensor for as long as it lasts. The same
+    reading with its chamber fed trips after stuck_ms; a valve crossing the band back and
+    forth does not hide it: the clock counts the time not vented in all."""
+    p = SafetyParams()
+    n, band = int(p.stuck_ms), p.stall_band_v
+    for chamber, vents in ((1, 5.0 - band - 0.01), (2, 5.0 + band + 0.01)):
+        floor = (0.0, None) if chamber == 1 else (None, 0.0)
+        r = Rig()
+        outs = [
+            r.tick(raw_volts=_volts_with_chambers(r, *floor), u=(vents, 6.0)) for _ in range(3 * n)
+        ]
+        assert outs[-1] == (vents, 6.0), chamber
+        assert not [e for e in r.sup.events() if e.level == ERROR], chamber
+        # fed (the valve beyond the band the other way): the same 0 V is a dead sensor
+        feeds = 10.0 - vents
+        r = Rig()
+        outs = [
+            r.tick(raw_volts=_volts_with_chambers(r, *floor), u=(feeds, 6.0)) for _ in range(n + 2)
+        ]
+        assert outs[n] == (feeds, 6.0) and outs[n + 1] == (5.0, 6.0), chamber
+        [ev] = [e for e in r.sup.events() if e.level == ERROR]
+        assert (ev.axis, ev.rule) == ("linear", "stuck") and f"p_c{chamber}" in ev.message
+        # vented every other sample: it trips once stuck_ms not vented have passed in all
+        r = Rig()
+        outs = []
+        for j in range(2 * n + 4):
+            u = vents if j % 2 else feeds
+            outs.append(r.tick(raw_volts=_volts_with_chambers(r, *floor), u=(u, 6.0)))
+        tripped = [j for j, o in enumerate(outs) if o[0] == 5.0]
+        # the supervisor at tick j reads the output of tick j − 1: ticks 2, 4, ... are vented,
+        # the odd ones count; the 251st odd tick (2n + 1) is strictly beyond stuck_ms
+        assert tripped[:1] == [2 * n + 1], tripped[:3]
+    # the chamber's own valve side decides: p_c1 at 0 V while chamber 2 is vented trips
+    r = Rig()
+    outs = [
+        r.tick(raw_volts=_volts_with_chambers(r, 0.0, None), u=(7.0, 6.0)) for _ in range(n + 2)
+    ]
+    assert outs[n + 1] == (5.0, 6.0)
+
+
 def test_output_sanity_never_writes_a_bad_command():
     for bad in (math.nan, math.inf, -0.001, 10.001):
         r = Rig()

@@ -39,7 +39,11 @@ fixed per errata); three model-based changes feed them better information.
    stay consistent). Measured on the twin, it does not pay: near zero it
    multiplies the command (and the laser noise in it) by up to 2.6, and the
    sine's 20 mm/0.25 Hz tracking got worse (RMSE 0.17 → 0.26 mm); off by
-   default, kept as an option for a rig with a quieter position sensor.
+   default, kept as an option for a rig with a quieter position sensor. Tasks
+   turn it on (:data:`pneu_control.task.session.LINEAR`): a load step drives the
+   command beyond ±1 V, where the chart's slope is 3–5× the 1 V secant and the
+   loop without it rings on in a saturated cycle (a 60 N step at 30 mm;
+   docs/composite-motion.md, "Holding a load").
 
 3. Reference derivatives (``reference_derivatives``): ``analytic`` uses the
    exact (r, ṙ, r̈) of the known reference (no TD lag: the fhan TD lags a

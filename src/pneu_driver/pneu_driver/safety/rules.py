@@ -50,6 +50,7 @@ __all__ = [
     "WINDOW_MAX",
     "angle_faults",
     "angle_zone",
+    "chamber_vented",
     "command",
     "fresh_array",
     "inlet_vented",
@@ -380,24 +381,40 @@ def inlet_vented(th, s):
 
 
 @kernel
+def chamber_vented(th, s, i):
+    """Valve #1 held beyond SAFE_V ± the stall band (``s.u_out[0]``) toward the exhaust of
+    cylinder chamber ``i`` (0: chamber 1, p_c1, below 5 V; 1: chamber 2, p_c2, above): the
+    MPYE's flow chart gives ≤ 1 % of its flow inside 0.36 V, the band of both valves."""
+    d = s.u_out[0] - SAFE_V
+    return (d if i == 1 else -d) > th.stall_band_v
+
+
+@kernel
 def frozen_faults(th, s, now, values, have_volts):
     """An analog value (``values``: the raw volts, else the SI values) bit-identical for
     longer than ``stuck_ms``.
 
-    Not frozen: the inlet's raw reading at or below :data:`P_FLOOR_V` while the valve vents
-    the inlet (:func:`inlet_vented`): at atmosphere a 0–10 V gauge sensor's output clips at
-    its zero, a constant that a live sensor gives (the paper's plumbing holds the inlet
-    vented at 0 V). Its clock restarts every such sample: a reading stuck at 0 V trips once
-    the inlet has not been vented for ``stuck_ms`` (fed or closed, the inlet's pressure
-    rises), a reading stuck anywhere else as before. Without raw volts, no exemption.
+    Not frozen: a pressure's raw reading at or below :data:`P_FLOOR_V` while its valve vents
+    that volume (the inlet: :func:`inlet_vented`; a cylinder chamber: :func:`chamber_vented`):
+    at atmosphere a 0–10 V gauge sensor's output clips at its zero, a constant that a live
+    sensor gives (the paper's plumbing holds the inlet vented at 0 V; a rod held against a
+    load near the cylinder's force keeps the other chamber vented). Its clock stands still
+    in such samples: a reading stuck at 0 V trips once the volume has been not vented for
+    ``stuck_ms`` in all since the reading froze (fed or closed, its pressure rises; a valve
+    crossing the band back and forth does not hide a dead sensor), a reading stuck anywhere
+    else as before. Without raw volts, no exemption.
     """
     keys = 0
-    vented = have_volts and inlet_vented(th, s)
     for i in range(4):
         v = values[i]
-        if v != s.frozen_v[i] or (i == 2 and vented and v <= P_FLOOR_V):
+        vented = False
+        if have_volts and i < 3 and v <= P_FLOOR_V:
+            vented = inlet_vented(th, s) if i == 2 else chamber_vented(th, s, i)
+        if v != s.frozen_v[i]:
             s.frozen_v[i] = v
             s.frozen_t[i] = now
+        elif vented:  # only the time not vented counts (v unchanged: a previous sample)
+            s.frozen_t[i] += now - s.sample_t
         elif now - s.frozen_t[i] > th.stuck_ns:
             keys |= 1 << (STUCK + i)
     return keys
