@@ -54,6 +54,7 @@ class Role:
     serves: tuple[str, ...] = ()  # private services (``~/x``) of its nodes
     calls_all_parameters: bool = False  # the parameter services of every node
     calls: tuple[str, ...] = ()  # services by full name (wildcards allowed)
+    publishes: tuple[str, ...] = ()  # topics outside pneu's table it must publish
 
 
 #: role -> nodes (the process's node names) and services
@@ -77,8 +78,14 @@ ROLES: dict[str, Role] = {
         Role("task_runner", ("task_runner",), serves=("start", "abort")),
         Role("exciter", ("pneu_exciter",)),
         Role("logger", ("logger",), calls_all_parameters=True),
-        # ros2 bag record: its node's services (pause, resume, snapshot, split, ...)
-        Role("recorder", ("rosbag2_recorder",), serves=("*",)),
+        # ros2 bag record: its node's services (pause, resume, snapshot, split, ...) and
+        # rosbag2's split event (Jazzy: the recorder will not start without its publisher)
+        Role(
+            "recorder",
+            ("rosbag2_recorder",),
+            serves=("*",),
+            publishes=("/events/write_split",),
+        ),
     )
 }
 
@@ -196,6 +203,7 @@ def _profile(
     """One node's profile: the role's topics, the node's basics, its services."""
     p = ET.SubElement(profiles, "profile", {"ns": "/", "node": node})
     pub = sorted(name for name, (pubs, _) in TOPIC_ROLES.items() if role in pubs)
+    pub += ROLES[role].publishes if role in ROLES else ()
     sub = sorted(name for name, (_, subs) in TOPIC_ROLES.items() if role in subs)
     _topics(p, "publish", [*pub, "/parameter_events", "/rosout"])
     _topics(p, "subscribe", [*sub, "/parameter_events"])
