@@ -68,6 +68,70 @@ __all__ = ["closed_loop", "refresh_cache"]
 _NEUTRAL_V = 5.0  # pneu_msgs_py.contract.samples.NEUTRAL_V: inactive axes, start
 
 
+@njit(**JIT)
+def _sample_finite(out):
+    """Whether every field of the sample s_k in ``out`` (p_c1 … counts) is finite."""
+    return (
+        math.isfinite(out[0])
+        and math.isfinite(out[1])
+        and math.isfinite(out[2])
+        and math.isfinite(out[3])
+        and math.isfinite(out[4])
+        and math.isfinite(out[5])
+        and math.isfinite(out[6])
+    )
+
+
+@njit(**JIT)
+def _supervise_sample(sp, si, sup_state, now, out):
+    """``RigCycle._begin``: the supervisor checks s_k with its raw volts, then gives the tick-k
+    output. Returns (linear V, rotary V, whether the Python supervisor has an event)."""
+    sf, sn, xw_t, xw_x, cw_t, cw_c, volts = sup_state
+    p1, p2, pm, x = out[0], out[1], out[2], out[3]
+    vpp = sp[SP_V_PER_PA]
+    pa = sp[SP_P_A]
+    volts[0] = (p1 - pa) * vpp  # pneu_sim.faults.injection.SensorScaling.volts
+    volts[1] = (p2 - pa) * vpp
+    volts[2] = (pm - pa) * vpp
+    volts[3] = x * sp[SP_V_PER_M] + sp[SP_V_MID]
+    sn[SN_EVENT] = 0
+    sup_check_sample(
+        sp, si, sf, sn, xw_t, xw_x, cw_t, cw_c, now, p1, p2, pm, x, np.int64(out[6]), volts
+    )
+    hold_l, hold_r = sup_outputs(sp, si, sf, sn, now)
+    return hold_l, hold_r, sn[SN_EVENT] != 0
+
+
+@njit(**JIT)
+def _record_sample(rec, k, out, hold_l, hold_r):
+    """Row k's sample s_k and the output the DAQ holds during step k (``RigCycle.held_pair``)."""
+    for i in range(7):
+        rec[k, REC_SAMPLE + i] = out[i]
+    rec[k, REC_HELD] = hold_l
+    rec[k, REC_HELD + 1] = hold_r
+
+
+@njit(**JIT)
+def _axis_answer(a, view, algs, t, out, rec, k, sup_on, sup_state, now):
+    """Axis a's answer u_k to s_k (``AxisController.update``, recorded in its columns of row k),
+    then, with the supervisor on, its ``command`` check (not for a NaN u: the caller stops).
+
+    ``view`` = (ac, ast, inp, rc, knots, code, table, uses_theta) of the axis.
+    Returns (u, whether the Python supervisor has an event).
+    """
+    ac, ast, inp, rc, kn, code, tab, th = view
+    u = axis_update(
+        a, ac, ast, inp, rc, kn, code, algs, tab, th, t, out[3], out[5], out[4], out[0], out[1],
+        rec, k, REC_AXIS + a * N_REC_AXIS,
+    )  # fmt: skip
+    if u != u or not sup_on:
+        return u, False
+    sf, sn = sup_state[0], sup_state[1]
+    sn[SN_EVENT] = 0
+    sup_command(sf, sn, a, u, now)
+    return u, sn[SN_EVENT] != 0
+
+
 @njit(cache=True, nogil=True, **JIT)
 def closed_loop(n, T_ns, st, prm, noise, out, axes, algs, sup_on, sp, si, sup_state, rec):
     """Run n cycles from the plant state ``st`` whose sample s_0 is in ``out``.
@@ -84,88 +148,41 @@ def closed_loop(n, T_ns, st, prm, noise, out, axes, algs, sup_on, sp, si, sup_st
     at cycle k; ``last_event`` the last cycle (n = the final check) at which the Python
     supervisor emits an event or counts something (−1: none).
     """
-    sf, sn, xw_t, xw_x, cw_t, cw_c, volts = sup_state
     hold_l = _NEUTRAL_V
     hold_r = _NEUTRAL_V
     last_event = -1
-    vpp = sp[SP_V_PER_PA]
-    pa = sp[SP_P_A]
-    vpm = sp[SP_V_PER_M]
-    vmid = sp[SP_V_MID]
     active, ac, ast, inp, rc, knots, codes, tables, uses_theta = axes
     # one view per axis, made once
-    ac0, ast0, inp0, rc0, kn0, tab0 = ac[0], ast[0], inp[0], rc[0], knots[0], tables[0]
-    ac1, ast1, inp1, rc1, kn1, tab1 = ac[1], ast[1], inp[1], rc[1], knots[1], tables[1]
-    code0, code1 = codes[0], codes[1]
-    th0, th1 = uses_theta[0], uses_theta[1]
+    view0 = (ac[0], ast[0], inp[0], rc[0], knots[0], codes[0], tables[0], uses_theta[0])
+    view1 = (ac[1], ast[1], inp[1], rc[1], knots[1], codes[1], tables[1], uses_theta[1])
     act0 = active[0]
     act1 = active[1]
     for k in range(n + 1):
         now = k * T_ns
-        p1 = out[0]
-        p2 = out[1]
-        pm = out[2]
-        x = out[3]
-        th = out[4]
-        om = out[5]
-        cnt = out[6]
-        if not (
-            math.isfinite(p1)
-            and math.isfinite(p2)
-            and math.isfinite(pm)
-            and math.isfinite(x)
-            and math.isfinite(th)
-            and math.isfinite(om)
-            and math.isfinite(cnt)
-        ):
+        if not _sample_finite(out):
             return NONFINITE_SAMPLE, k, last_event
         if sup_on:  # RigCycle._begin: check s_k, then the tick-k output
-            volts[0] = (p1 - pa) * vpp  # pneu_sim.faults.injection.SensorScaling.volts
-            volts[1] = (p2 - pa) * vpp
-            volts[2] = (pm - pa) * vpp
-            volts[3] = x * vpm + vmid
-            sn[SN_EVENT] = 0
-            sup_check_sample(
-                sp, si, sf, sn, xw_t, xw_x, cw_t, cw_c, now, p1, p2, pm, x, np.int64(cnt), volts
-            )
-            hold_l, hold_r = sup_outputs(sp, si, sf, sn, now)
-            if sn[SN_EVENT]:
+            hold_l, hold_r, event = _supervise_sample(sp, si, sup_state, now, out)
+            if event:
                 last_event = k
         if k == n:
             break
-        for i in range(7):
-            rec[k, REC_SAMPLE + i] = out[i]
-        rec[k, REC_HELD] = hold_l  # what the DAQ holds during step k (RigCycle.held_pair)
-        rec[k, REC_HELD + 1] = hold_r
+        _record_sample(rec, k, out, hold_l, hold_r)
         t = now * 1e-9  # (stamp - first stamp) * 1e-9, first stamp 0
         ans_l = hold_l
         ans_r = hold_r
         if act0:
-            u = axis_update(
-                0, ac0, ast0, inp0, rc0, kn0, code0, algs, tab0, th0, t, x, om, th, p1, p2,
-                rec, k, REC_AXIS,
-            )  # fmt: skip
-            if u != u:
+            ans_l, event = _axis_answer(0, view0, algs, t, out, rec, k, sup_on, sup_state, now)
+            if ans_l != ans_l:
                 return NONFINITE_COMMAND, k, last_event
-            if sup_on:
-                sn[SN_EVENT] = 0
-                sup_command(sf, sn, 0, u, now)
-                if sn[SN_EVENT]:
-                    last_event = k
-            ans_l = u
+            if event:
+                last_event = k
         if act1:
-            u = axis_update(
-                1, ac1, ast1, inp1, rc1, kn1, code1, algs, tab1, th1, t, x, om, th, p1, p2,
-                rec, k, REC_AXIS + N_REC_AXIS,
-            )  # fmt: skip
-            if u != u:
+            ans_r, event = _axis_answer(1, view1, algs, t, out, rec, k, sup_on, sup_state, now)
+            if ans_r != ans_r:
                 return NONFINITE_COMMAND, k, last_event
-            if sup_on:
-                sn[SN_EVENT] = 0
-                sup_command(sf, sn, 1, u, now)
-                if sn[SN_EVENT]:
-                    last_event = k
-            ans_r = u
+            if event:
+                last_event = k
         step_period(st, prm, noise, k, hold_l, hold_r, out)  # k -> k+1 under the tick-k output
         if not sup_on:  # RigCycle.advance: the DAQ now holds the (finite) answers u_k
             hold_l = ans_l

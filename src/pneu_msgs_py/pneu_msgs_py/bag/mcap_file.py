@@ -379,10 +379,11 @@ class McapFile:
         return None
 
     def _scan(self) -> Iterator[Chunk]:
+        """Chunks in file order from a walk over every record (no usable summary)."""
         f = self._f
         pos = self._data_start
         f.seek(pos)
-        pending: Chunk | None = None
+        pending: Chunk | None = None  # the last chunk, until the message indexes after it end
         loose: list[bytes] = []
         n_chunks = 0
         ended = False
@@ -395,16 +396,8 @@ class McapFile:
                 if pending is not None:
                     yield pending
                     pending = None
-                nxt = self._resync(pos)
-                if nxt is None and 0x01 <= op <= 0x10 and length <= self.size:
-                    break  # a record cut by the end of the file: truncated
-                self.warnings.append(
-                    f"unreadable bytes from byte {pos} "
-                    + (f"to {nxt}: skipped to the next intact chunk" if nxt else "to the end")
-                    + " (messages there lost, count unknown)"
-                )
+                nxt, ended = self._skip_unreadable(pos, op, length)
                 if nxt is None:
-                    ended = True  # nothing more to read: not a truncation
                     break
                 pos = nxt
                 f.seek(pos)
@@ -415,36 +408,73 @@ class McapFile:
             if op != R.Op.MESSAGE_INDEX and pending is not None:
                 yield pending
                 pending = None
-            try:
-                if op == R.Op.CHUNK:
-                    try:
-                        pending = Chunk(self._chunk_data(head + body, pos), None, where=pos)
-                        n_chunks += 1
-                    except CorruptBagError as e:
-                        pending = Chunk(b"", {}, where=pos, problem=e.problem, lost={})
-                elif op == R.Op.MESSAGE_INDEX and pending is not None:
-                    cid, offs = self._parse_message_index(head + body, 0)
-                    if pending.problem:
-                        pending.lost[cid] = pending.lost.get(cid, 0) + len(offs)
-                    else:
-                        if pending.offsets is None:
-                            pending.offsets = {}
-                        pending.offsets[cid] = offs
-                elif op in (R.Op.SCHEMA, R.Op.CHANNEL):
-                    self._add_definition(op, body)
-                elif op == R.Op.MESSAGE:
-                    loose.append(head + body)
-                elif op == R.Op.METADATA:
-                    self._add_metadata(body)
-                elif op == R.Op.DATA_END:
-                    ended = True
-                    break
-            except (IndexError, ValueError, struct.error, UnicodeDecodeError):
-                if op == R.Op.MESSAGE_INDEX and pending is not None and not pending.problem:
-                    pending.offsets = None  # walk the (CRC-checked) records instead
-                else:
-                    self.warnings.append(f"unreadable record (opcode {op}) at byte {pos}: skipped")
+            if op == R.Op.DATA_END:
+                ended = True
+                break
+            pending = self._take(op, head, body, pos, pending, loose)
+            if op == R.Op.CHUNK and pending is not None and not pending.problem:
+                n_chunks += 1
             pos += 9 + length
+        yield from self._scan_end(pending, loose, ended, n_chunks)
+
+    def _skip_unreadable(self, pos: int, op: int, length: int) -> tuple[int | None, bool]:
+        """Past a record at ``pos`` with an impossible opcode or length: (where the next intact
+        chunk starts, or None; whether the data ended cleanly). A warning says what was skipped;
+        a record cut by the end of the file is (None, False): a truncation, said at the end."""
+        nxt = self._resync(pos)
+        if nxt is None and 0x01 <= op <= 0x10 and length <= self.size:
+            return None, False  # a record cut by the end of the file: truncated
+        self.warnings.append(
+            f"unreadable bytes from byte {pos} "
+            + (f"to {nxt}: skipped to the next intact chunk" if nxt else "to the end")
+            + " (messages there lost, count unknown)"
+        )
+        if nxt is None:
+            return None, True  # nothing more to read: not a truncation
+        return nxt, False
+
+    def _take(
+        self, op: int, head: bytes, body: bytes, pos: int, pending: Chunk | None, loose: list[bytes]
+    ) -> Chunk | None:
+        """One whole record at ``pos`` met while scanning; returns the pending chunk (a chunk
+        record starts a new one). Loose message records are gathered in ``loose``."""
+        try:
+            if op == R.Op.CHUNK:
+                try:
+                    return Chunk(self._chunk_data(head + body, pos), None, where=pos)
+                except CorruptBagError as e:
+                    return Chunk(b"", {}, where=pos, problem=e.problem, lost={})
+            elif op == R.Op.MESSAGE_INDEX and pending is not None:
+                self._index_into(pending, head + body)
+            elif op in (R.Op.SCHEMA, R.Op.CHANNEL):
+                self._add_definition(op, body)
+            elif op == R.Op.MESSAGE:
+                loose.append(head + body)
+            elif op == R.Op.METADATA:
+                self._add_metadata(body)
+        except (IndexError, ValueError, struct.error, UnicodeDecodeError):
+            if op == R.Op.MESSAGE_INDEX and pending is not None and not pending.problem:
+                pending.offsets = None  # walk the (CRC-checked) records instead
+            else:
+                self.warnings.append(f"unreadable record (opcode {op}) at byte {pos}: skipped")
+        return pending
+
+    def _index_into(self, pending: Chunk, raw: bytes) -> None:
+        """A message index record after ``pending``: its channel's offsets, or (a damaged
+        chunk) the count of messages lost on that channel."""
+        cid, offs = self._parse_message_index(raw, 0)
+        if pending.problem:
+            pending.lost[cid] = pending.lost.get(cid, 0) + len(offs)
+        else:
+            if pending.offsets is None:
+                pending.offsets = {}
+            pending.offsets[cid] = offs
+
+    def _scan_end(
+        self, pending: Chunk | None, loose: list[bytes], ended: bool, n_chunks: int
+    ) -> Iterator[Chunk]:
+        """The end of a scan: the last chunk, the loose messages as one chunk, and
+        ``truncated`` with its warning when no data end record closed the walk."""
         if pending is not None:
             # its message indexes may be cut: walk the records instead
             if not ended and not pending.problem:

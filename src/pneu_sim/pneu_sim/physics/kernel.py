@@ -6,7 +6,13 @@ reference the fast path is tested against). ``error_model="numpy"`` drops the
 division-by-zero checks (no divisor here can be zero with validated parameters; a
 zero would give inf/NaN instead of ZeroDivisionError): with the substep inlined
 and K(θ) carried from one substep to the next, the period runs ≈ 1.4× faster with
-bit-identical results. Layouts of the state vector ``st`` and the parameter vector ``prm``
+bit-identical results. The substep's pieces keep that, measured: numba's reference-count
+pruning removes the counts on ``st`` and ``prm`` from the substep loop as it stands, but
+not once the motor chambers were a function of ``prm`` (inlined or not: an
+``NRT_incref``/``NRT_decref`` calls in every substep in the LLVM IR, 13 % slower), so the pieces
+read ``prm`` only where small (:func:`motor_speed`, :func:`sleeve_torque`) or take numbers
+(:func:`swept_flow`, :func:`iso_flow`); check ``inspect_llvm`` of :func:`step_period` after
+a change. Layouts of the state vector ``st`` and the parameter vector ``prm``
 are the index constants below; :mod:`pneu_sim.physics.pack` fills ``prm`` from
 :class:`~pneu_sim.physics.params.PlantParams`.
 
@@ -413,6 +419,51 @@ def substep_linear(st, prm, u_l, h):
 
 
 @njit(**_JIT, inline="always")
+def motor_speed(prm, om, M_m, T_seal, h):
+    """ω after h seconds under the vane torque M_m (Eq. 7, stick/slip on J_m + J_load).
+
+    Friction Eq. 9–10 raised by the seal torque ``T_seal`` and the load (T_c, breakaway
+    T_bk, c_load).
+    """
+    return stick_slip(
+        om,
+        M_m,
+        prm[P_J] + prm[P_JLD],
+        prm[P_MC] + T_seal + prm[P_TLC],
+        prm[P_MS] + T_seal + prm[P_TLS],
+        0.0,
+        prm[P_MV] + prm[P_CLD],
+        h,
+    )
+
+
+@njit(**_JIT, inline="always")
+def sleeve_torque(prm, om, om_new, M_m, T_seal, h):
+    """|T_rod|, the torque through the sleeve: what the rod side resists (seals, load, load
+    inertia) while ω went from ``om`` to ``om_new`` over h; N·m, ≥ 0."""
+    if om_new != 0.0:
+        sg = 1.0 if om_new > 0.0 else -1.0
+        T_lc = prm[P_TLC]
+        c_ld = prm[P_CLD]
+        J_ld = prm[P_JLD]
+        return abs(sg * (T_seal + T_lc) + c_ld * om_new + J_ld * (om_new - om) / h)
+    # stuck: statically indeterminate; at most what the motor applies
+    return min(abs(M_m), T_seal + prm[P_TLS])
+
+
+@njit(**_JIT)
+def swept_flow(K, om, pm1, pm2, RT):
+    """Gas the motor's swept displacement carries from p_m1 to p_m2: ṁ_sw = K ω p_up / (R T0).
+
+    At the upstream density: p_up = p_m1 for ω ≥ 0, p_m2 for ω < 0 (``K`` = K(θ), Eq. 8).
+    Returns (ṁ_sw, ∂ṁ_sw/∂p_m1, ∂ṁ_sw/∂p_m2), kg/s and kg/(s·Pa).
+    """
+    if om >= 0.0:
+        return K * om * pm1 / RT, K * om / RT, 0.0
+    return K * om * pm2 / RT, 0.0, K * om / RT
+
+
+@njit(**_JIT, inline="always")
 def substep_rotary(st, prm, u_r, h, K):
     """The motor axis over h seconds: valve #2 spool, motor, its chambers, the inlet sensor lag.
 
@@ -437,26 +488,8 @@ def substep_rotary(st, prm, u_r, h, K):
     g1 = st[S_PC1] - pa
     g2 = st[S_PC2] - pa
     T_seal = prm[P_KSEAL] * ((g1 if g1 > 0.0 else 0.0) + (g2 if g2 > 0.0 else 0.0))
-    T_lc = prm[P_TLC]
-    c_ld = prm[P_CLD]
-    J_ld = prm[P_JLD]
-    om_new = stick_slip(
-        om,
-        M_m,
-        prm[P_J] + J_ld,
-        prm[P_MC] + T_seal + T_lc,
-        prm[P_MS] + T_seal + prm[P_TLS],
-        0.0,
-        prm[P_MV] + c_ld,
-        h,
-    )
-    # torque through the sleeve: what the rod side resists (seals, load, load inertia)
-    if om_new != 0.0:
-        sg = 1.0 if om_new > 0.0 else -1.0
-        T_rod = abs(sg * (T_seal + T_lc) + c_ld * om_new + J_ld * (om_new - om) / h)
-    else:  # stuck: statically indeterminate; at most what the motor applies
-        T_rod = min(abs(M_m), T_seal + prm[P_TLS])
-    st[S_TROD] = T_rod
+    om_new = motor_speed(prm, om, M_m, T_seal, h)
+    st[S_TROD] = sleeve_torque(prm, om, om_new, M_m, T_seal, h)
     th_new = th + h * om_new
     K = vane_factor(prm, th_new)
     br = P_VALVE_R
@@ -465,21 +498,12 @@ def substep_rotary(st, prm, u_r, h, K):
     bla = prm[br + VB_BLAM]
     mi, _d, dmi = iso_flow(prm[P_PSR], pm1, A_s4 * C, b, bla)
     mo, dmo, _d = iso_flow(pm1, pa, A_4e * C, b, bla)
-    # swept displacement: gas at the upstream density crosses the motor
-    if om_new >= 0.0:
-        msw = K * om_new * pm1 / RT
-        dmsw1 = K * om_new / RT
-        dmsw2 = 0.0
-    else:
-        msw = K * om_new * pm2 / RT
-        dmsw1 = 0.0
-        dmsw2 = K * om_new / RT
+    msw, dmsw1, dmsw2 = swept_flow(K, om_new, pm1, pm2, RT)
     klk = prm[P_KLK]
     mlk = klk * (pm1 - pm2)
     cm1 = n * RT / prm[P_VM1]
     pm1n = implicit_pressure(pm1, cm1, mi - mo - msw - mlk, dmi - dmo - dmsw1 - klk, h)
-    if om_new >= 0.0:
-        msw = K * om_new * pm1n / RT
+    msw = swept_flow(K, om_new, pm1n, pm2, RT)[0]
     mlk = klk * (pm1n - pm2)
     cm2 = n * RT / prm[P_VM2]
     if prm[P_PLUMB] == 0.0:  # paper: port B vents through the silencer
