@@ -340,3 +340,33 @@ def test_the_rotary_rules_act_alike_in_a_stream_made_to_reach_them():
     assert not stall[49:64].any()
     assert stall[64:].tolist() == [0, 0, 0, 1, 1, 1, 1, 1]  # forward: from the inlet high
     assert set(out_f[stall == 1, 6]) == {2.0, 8.0}  # the driving voltage, each way
+
+
+@pytest.mark.parametrize("policy", ["hold", "ramp", "trip"])
+def test_the_late_rules_act_alike_in_a_stream_made_to_reach_them(policy):
+    """The linear controller falls silent for longer than the watchdog after 5 fresh ticks:
+    held or ramped, then 5 V, the trip bit, the counts, compiled = Python."""
+    params = dataclasses.replace(P, late_policy=policy)
+    hold, wd = round(params.late_hold_ms), round(params.watchdog_ms)
+
+    def step(sent):
+        f = (2.5e5, 2.4e5, 1.8e5, 0.0, 0.0, 0.0)
+        return (f, 0, (2.0, 2.0, 2.0, 2.0), True, (9.0, 6.0), 0, 1, (0, 0), (sent, 1))
+
+    steps = [step(1) for _ in range(5)] + [step(0) for _ in range(wd + 5)]
+    keys, out_f = _run_both(params, steps)
+    lin = out_f[5:, 0]  # late by 1, 2, ... periods
+    ramp = params.late_ramp_ms
+    want = {
+        "hold": [9.0] * hold,
+        "ramp": [9.0 - 4.0 * min(m / ramp, 1.0) for m in range(1, hold + 1)],
+        "trip": [5.0] * hold,  # 5 V from the first late tick (and latched by the caller)
+    }[policy]
+    assert lin[:hold] == pytest.approx(want, abs=1e-12)
+    assert lin[hold:].tolist() == [5.0] * (len(lin) - hold)
+    assert out_f[:, 1].tolist() == [6.0] * len(steps)  # the rotary answers on time
+    assert keys[:, 8].tolist() == [0] * 5 + [1 if policy == "trip" else 0] * (wd + 5)
+    assert keys[:, 9].tolist() == [rules.LATE_NO] * 5 + [
+        {"hold": rules.LATE_HOLD, "ramp": rules.LATE_RAMP, "trip": rules.LATE_CLOSED}[policy]
+    ] * hold + [rules.LATE_CLOSED] * (wd + 5 - hold)
+    assert keys[:, 3].tolist() == [0] * (5 + wd - 1) + [1] * 6  # the watchdog from the wd-th
