@@ -9,13 +9,14 @@ into numba callers) on three records:
 - ``s``, :data:`STATE`: what the rules remember (the velocity and speed windows,
   the last encoder step, the frozen values and since when, the stall clock, the
   stroke and angle soft-limit zones, the last command and the last output per axis,
-  the pending refusals);
+  the pending refusals, the late, held and ramped ticks per axis);
 - ``d``, :data:`FINDINGS`: the numbers behind a rule that fired this call (for
   the message), written only when it fires (``nf_fields``/``nf_volts`` always).
 
 A rule returns a decision, never a message: the fault keys present as a bit mask
 (:data:`SENSOR_KEYS`; bit ``a`` = axis ``a`` for the watchdog), or a code of what
-changed (:func:`update_zone`, :func:`command`). Two callers, one source:
+changed (:func:`update_zone`, :func:`command`), or what a late command becomes
+(:func:`late_command`; DESIGN §14). Two callers, one source:
 :class:`~pneu_driver.safety.supervisor.SafetySupervisor` (events, messages,
 latches, acknowledge) and the compiled closed loop's adapter
 (:mod:`pneu_control.fastloop.supervisor`: latches as bits, the event flag).
