@@ -31,7 +31,7 @@ EDITS = {
 FILES = {
     "plant.yaml": ("--plant", "  M: {value: 0.28", "  M: {value: fast"),
     "controllers.yaml": ("--controllers", "      kp: 0.38", "      kp: fast"),
-    "safety.yaml": ("--safety", "watchdog_ms: 5.0 ", "watchdog_ms: fast "),
+    "safety.yaml": ("--safety", "watchdog_ms: 50.0 ", "watchdog_ms: fast "),
     "rig.yaml": (None, "p_atm_pa: 101325.0", "p_atm_pa: fast"),
 }
 

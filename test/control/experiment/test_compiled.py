@@ -250,7 +250,9 @@ def test_tiny_runs(duration_s):
         ({"max_accel_rad_s2": 1.0, "encoder_slack_counts": 0}, "encoder_jump"),
         ({"stall_inlet_pa": 1.2e5, "stall_ms": 2.0}, "no_rotation"),
         ({"stroke_margin_m": 0.066, "stroke_hyst_m": 0.0005}, "soft_limit"),
-        ({"watchdog_ms": 0.5}, "watchdog"),
+        ({"watchdog_ms": 0.5, "late_hold_ms": 0.0, "late_ramp_ms": 0.0}, "watchdog"),
+        ({"late_policy": "trip"}, "command"),  # commands never late in process: no trip
+        ({"late_policy": "ramp"}, "command"),
         ({"extend_above_neutral": False, "stroke_margin_m": 0.066}, "soft_limit"),
         (
             {"velocity_window_ms": 1.0, "speed_window_ms": 2.0, "max_speed_rpm": 650.0},
@@ -300,7 +302,7 @@ LIMITED = {"angle_limits": True, "angle_min_deg": -100.0, "angle_max_deg": 100.0
         (RAMP, None, LIMITED, {"soft_limit", "angle_limit"}),
         ({"kind": "constant", "value": 90.0}, {"T_bk": 10.0}, {}, {"no_rotation"}),
         ({"kind": "constant", "value": 720.0}, None, {"max_speed_rpm": 200.0}, {"overspeed"}),
-        (RAMP, None, {"watchdog_ms": 0.5}, {"watchdog"}),
+        (RAMP, None, {"watchdog_ms": 0.5, "late_hold_ms": 0.0, "late_ramp_ms": 0.0}, {"watchdog"}),
         (RAMP, None, {"stuck_ms": 1.5}, {"stuck"}),
     ],
     ids=["angle-limits", "blocked", "overspeed", "watchdog", "stuck"],

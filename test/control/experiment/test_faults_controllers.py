@@ -15,6 +15,7 @@ from pneu_control.analysis.run_analysis import analyze
 from pneu_control.experiment import runner as runner_mod
 from pneu_control.experiment.fault_table import Scenario, run_scenario
 from pneu_control.experiment.session import build_spec, execute
+from pneu_driver.safety import SafetyParams
 from pneu_msgs_py.bag.reader import read_run
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.paths import config_file
@@ -22,6 +23,8 @@ from pneu_msgs_py.params.paths import config_file
 F = "start_s=0.5,duration_s=0.5"
 K0 = 500
 RETUNED = config_file("controllers_retuned.yaml")
+P = SafetyParams()
+WD, HOLD = round(P.watchdog_ms), round(P.late_hold_ms)  # in 1 ms periods
 
 
 def test_silent_controllers_trip_the_watchdog_after_watchdog_ms(tmp_path):
@@ -30,18 +33,22 @@ def test_silent_controllers_trip_the_watchdog_after_watchdog_ms(tmp_path):
         tmp_path,
         compare=False,
     )
-    # last command answers sample k0-1; at tick k0+5 it is 6 ms old (> watchdog_ms = 5)
-    assert row.rule == "watchdog" and row.detection_cycles == 5
-    assert row.safe_cycles == 0
+    # last command answers sample k0-1; at tick k0+WD it is WD+1 ms old (> watchdog_ms)
+    assert row.rule == "watchdog" and row.detection_cycles == WD
+    assert row.safe_cycles == 0  # 5 V already: the hold ended at tick k0+HOLD+1
     assert row.bag_complete, row.note
     assert row.end_state == "SAFE (latched)"
     res = row.result
     for axis in ("linear", "rotary"):
-        # until the trip the DAQ holds the last command; from then on 5 V, also after the
-        # controller is back (latched until acknowledged)
-        assert np.all(res.applied[axis][K0 + 5 :] == 5.0)
-        assert np.all(res.applied[axis][K0 : K0 + 5] == res.axes[axis]["u"][K0 - 1])
+        # tick k0 writes the answer to k0-1 (fresh), ticks k0+1..k0+HOLD hold it (late by
+        # 1..HOLD ms: late_policy hold); from then on 5 V, also after the controller is
+        # back (the watchdog latched it until acknowledged)
+        assert np.all(res.applied[axis][K0 + HOLD + 1 :] == 5.0)
+        assert np.all(res.applied[axis][K0 : K0 + HOLD + 1] == res.axes[axis]["u"][K0 - 1])
         assert np.isnan(res.axes[axis]["u"][K0 : K0 + 500]).all()  # nothing published
+        # late by 1 .. WD-1 ms counted (the WD-th is the watchdog's), HOLD of them held
+        assert res.safety_counters[f"{axis}.late_ticks"] == WD - 1
+        assert res.safety_counters[f"{axis}.held_ticks"] == HOLD
     data = read_run(row.bag)
     cmd = data["/pneu/linear/valve_command"]
     assert len(cmd) == len(res.t) - 500  # the hung controller published nothing
@@ -79,7 +86,9 @@ def test_a_controller_that_raises_is_treated_as_crashed(tmp_path, monkeypatch):
     res = execute(spec, tmp_path)  # must not raise
     rules = [e.rule for e in res.safety_events]
     assert "controller_exception" in rules and "watchdog" in rules
-    assert np.all(res.applied["linear"][306:] == 5.0)  # 6 ms after the last command
+    # the last command answers sample 299: held until late by late_hold_ms, then 5 V
+    assert np.all(res.applied["linear"][300 + HOLD + 1 :] == 5.0)
+    assert res.applied["linear"][300 + HOLD] == res.axes["linear"]["u"][299]
     data = read_run(tmp_path / "run.mcap")
     names = [s.name for o in data["/diagnostics"].objects for s in o]
     assert "pneu_runner: safety linear controller_exception" in names
@@ -108,7 +117,7 @@ def test_analyze_marks_and_excludes_the_fault_like_the_runner(tmp_path):
     inj = next(iv for iv in an.faults if iv.kind == "injected")
     assert (inj.start_s, inj.end_s) == (0.6, 0.8)
     safe = next(iv for iv in an.faults if iv.kind == "safe")
-    assert safe.start_s == pytest.approx(0.605) and math.isinf(safe.end_s)
+    assert safe.start_s == pytest.approx(0.6 + WD * 1e-3) and math.isinf(safe.end_s)
     m, mr = an.metrics["linear"], res.metrics["linear"]
     # window 0.2 s .. end, minus 0.6 s .. end: samples 200..599
     assert m.n_samples == mr.n_samples == 400
@@ -136,7 +145,7 @@ def test_every_bag_records_the_safety_configuration(tmp_path):
     execute(_spec([], duration=0.1), tmp_path / "on")
     rec = read_run(tmp_path / "on" / "run.mcap").metadata["pneu.safety"]
     assert rec["enabled"] == "true" and rec["allow_unsafe"] == "false"
-    assert json.loads(rec["params_json"])["watchdog_ms"] == 5.0
+    assert json.loads(rec["params_json"])["watchdog_ms"] == P.watchdog_ms
     execute(_spec([], duration=0.1, safety=False), tmp_path / "off")
     assert read_run(tmp_path / "off" / "run.mcap").metadata["pneu.safety"]["enabled"] == "false"
 
@@ -146,11 +155,13 @@ def test_unsafe_safety_file_refused_unless_allowed_then_logged(tmp_path):
 
     text = config_file("safety.yaml").read_text()
     bad = tmp_path / "safety.yaml"
-    bad.write_text(text.replace("watchdog_ms: 5.0 ", "watchdog_ms: 2000.0 "))
+    default = f"watchdog_ms: {P.watchdog_ms} "
+    assert default in text
+    bad.write_text(text.replace(default, "watchdog_ms: 2000.0 "))
     with pytest.raises(ParamError, match=r"safety\.yaml:\d+:1: watchdog_ms"):
         build_spec(axes=("linear",), duration_s=0.1, controllers_file=RETUNED, safety_file=bad)
     bad.write_text(
-        text.replace("watchdog_ms: 5.0 ", "watchdog_ms: 2000.0 ").replace(
+        text.replace(default, "watchdog_ms: 2000.0 ").replace(
             "allow_unsafe: false", "allow_unsafe: true"
         )
     )

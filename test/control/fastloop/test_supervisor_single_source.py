@@ -67,4 +67,6 @@ def test_every_decision_of_the_python_supervisor_is_called_here():
     # not here: the non-finite fields (the loop stops first), the encoder bound as a number
     # for a report, and deriving the thresholds (packed from the supervisor's own)
     assert py - _rules_calls(TREE) == {"non_finite_fields", "jump_allowance", "thresholds"}
-    assert {"sample_faults", "command", "watchdog_faults", "update_zone", "output_v"} <= py
+    assert {
+        "sample_faults", "command", "watchdog_faults", "late_faults", "update_zone", "output_v"
+    } <= py  # fmt: skip

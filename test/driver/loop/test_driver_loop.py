@@ -125,11 +125,18 @@ def test_overrun_skips_ticks_and_counts_them():
     assert loop.last_sample.stamp_ns == 8 * T
 
 
-def test_watchdog_and_events_through_the_loop():
+def test_late_commands_held_then_closed_then_the_watchdog_through_the_loop():
+    """The controllers answer samples 0..2, then fall silent: the loop writes their last
+    commands held for late_hold_ms (the default policy), then 5 V, and the watchdog latches
+    watchdog_ms after the last fresh tick; every late and held tick counted."""
+    p = SafetyParams()
+    hold, wd = round(p.late_hold_ms), round(p.watchdog_ms)  # in 1 ms periods
     events = []
     written = []
+    states = []
 
     def controller(s):
+        states.append(loop.status()["linear"].state)
         if s.k < 3:
             loop.put_command("linear", 7.0, s.stamp_ns)
             loop.put_command("rotary", 6.0, s.stamp_ns)
@@ -139,23 +146,29 @@ def test_watchdog_and_events_through_the_loop():
     )
     orig = backend.write
     backend.write = lambda a, b: (written.append((a, b)), orig(a, b))
-    loop.run(12)
-    # writes at ticks 0..11: safe, then the commands from samples 0..2 at ticks 1..3, held by the
-    # supervisor while fresh (age ≤ 5 ms), then safe; the final write is the shutdown's
+    n = wd + 10
+    loop.run(n)
+    # writes at ticks 0..n-1: safe, the commands from samples 0..2 at ticks 1..3 (fresh), the
+    # last one held at ticks 4..3+hold (late by 1..hold ms), then 5 V; the final write is the
+    # shutdown's
     assert written[0] == (5.0, 5.0)
-    assert written[1:4] == [(7.0, 6.0)] * 3
-    assert written[7] == (7.0, 6.0)  # tick 7: command from sample 2 is 5 ms old: still fresh
-    assert written[8] == (5.0, 5.0)  # tick 8: 6 ms: watchdog
-    assert written[-1] == (5.0, 5.0)
-    assert {(e.axis, e.rule, e.level) for e in events} >= {
-        ("linear", "watchdog", "ERROR"),
-        ("rotary", "watchdog", "ERROR"),
-    }
+    assert written[1 : 4 + hold] == [(7.0, 6.0)] * (3 + hold)
+    assert written[4 + hold : n] == [(5.0, 5.0)] * (n - 4 - hold)
+    # not latched until the command is older than the watchdog: the wd-th late tick
+    trips = [e for e in events if e.rule == "watchdog" and e.level == "ERROR"]
+    assert {e.axis for e in trips} == {"linear", "rotary"}
+    assert all(e.stamp_ns == (3 + wd) * T for e in trips)
+    assert states[: 3 + wd] == ["SAFE"] + ["OK"] * (2 + wd) and states[3 + wd] == "SAFE"
+    assert not [e for e in events if e.level == "ERROR" and e.stamp_ns < (3 + wd) * T]
     st = loop.status()
     assert st["linear"].state == "SAFE" and "watchdog" in st["linear"].causes
     diag = loop.diagnostics()
-    assert diag["cycles"] == "12" and diag["pacing"] == "software"
+    assert diag["cycles"] == str(n) and diag["pacing"] == "software"
     assert diag["linear.state"] == "SAFE" and diag["linear.causes"] == "watchdog"
+    for axis in ("linear", "rotary"):  # late by 1 .. wd-1 ms, of them 1 .. hold held
+        assert diag[f"{axis}.late_ticks"] == str(wd - 1)
+        assert diag[f"{axis}.held_ticks"] == str(hold)
+        assert diag[f"{axis}.ramped_ticks"] == "0"
 
 
 def test_estop_and_reset_from_another_thread():

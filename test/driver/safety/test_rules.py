@@ -35,8 +35,9 @@ _ANGLE_ZONE = (
 
 
 @numba.njit(error_model="numpy")
-def _drive(th_a, s_a, d_a, f, c, volts, have, u, u_t, now, blocked, out_i, out_f):
-    """Per step k: the sample rules, both commands, the watchdog, the zone, both outputs."""
+def _drive(th_a, s_a, d_a, f, c, volts, have, u, u_t, now, blocked, sent, out_i, out_f):
+    """Per step k: the sample rules, both commands, the watchdog, the late-command policy,
+    the zone, both outputs."""
     th = th_a[0]
     s = s_a[0]
     d = d_a[0]
@@ -48,13 +49,18 @@ def _drive(th_a, s_a, d_a, f, c, volts, have, u, u_t, now, blocked, out_i, out_f
             th, s, d, t, f[k, 0], f[k, 1], f[k, 2], f[k, 3], c[k], vals, have[k]
         )
         out_i[k, 0] = keys
-        out_i[k, 1] = rules.command(th, s, 0, u[k, 0], u_t[k, 0])
-        out_i[k, 2] = rules.command(th, s, 1, u[k, 1], u_t[k, 1])
+        if sent[k, 0]:
+            out_i[k, 1] = rules.command(th, s, 0, u[k, 0], u_t[k, 0])
+        if sent[k, 1]:
+            out_i[k, 2] = rules.command(th, s, 1, u[k, 1], u_t[k, 1])
         out_i[k, 3] = rules.watchdog_faults(th, s, now[k])
+        out_i[k, 8] = rules.late_faults(th, s, now[k])
+        out_i[k, 9] = rules.late_command(th, s, 0, now[k])
+        out_i[k, 10] = rules.late_command(th, s, 1, now[k])
         out_i[k, 4] = rules.update_zone(th, s, d)
         out_i[k, 5] = rules.sensor_key_axes(keys)
-        out_f[k, 0] = rules.output_v(th, s, 0, blocked[k, 0])
-        out_f[k, 1] = rules.output_v(th, s, 1, blocked[k, 1])
+        out_f[k, 0] = rules.output_v(th, s, 0, blocked[k, 0], now[k])
+        out_f[k, 1] = rules.output_v(th, s, 1, blocked[k, 1], now[k])
         out_f[k, 2] = d.jump_deviation if keys & (1 << rules.ENCODER_JUMP) else 0.0
         out_f[k, 3] = d.speed_rpm if keys & (1 << rules.OVERSPEED) else 0.0
         out_f[k, 4] = d.braking_m if out_i[k, 4] else 0.0
@@ -64,9 +70,9 @@ def _drive(th_a, s_a, d_a, f, c, volts, have, u, u_t, now, blocked, out_i, out_f
         out_i[k, 7] = d.nf_volts if have[k] else 0
 
 
-def _python(th, s, d, f, c, volts, have, u, u_t, now, blocked):
+def _python(th, s, d, f, c, volts, have, u, u_t, now, blocked, sent):
     n = len(f)
-    out_i = np.zeros((n, 8), dtype=np.int64)
+    out_i = np.zeros((n, 11), dtype=np.int64)
     out_f = np.zeros((n, 7))
     for k in range(n):
         t = k * T_NS
@@ -75,13 +81,18 @@ def _python(th, s, d, f, c, volts, have, u, u_t, now, blocked):
         vals = tuple(volts[k].tolist()) if have[k] else tuple(fk[:4])
         keys |= rules.sample_faults(th, s, d, t, *fk[:4], int(c[k]), vals, bool(have[k]))
         out_i[k, 0] = keys
-        out_i[k, 1] = rules.command(th, s, 0, float(u[k, 0]), int(u_t[k, 0]))
-        out_i[k, 2] = rules.command(th, s, 1, float(u[k, 1]), int(u_t[k, 1]))
+        if sent[k, 0]:
+            out_i[k, 1] = rules.command(th, s, 0, float(u[k, 0]), int(u_t[k, 0]))
+        if sent[k, 1]:
+            out_i[k, 2] = rules.command(th, s, 1, float(u[k, 1]), int(u_t[k, 1]))
         out_i[k, 3] = rules.watchdog_faults(th, s, int(now[k]))
+        out_i[k, 8] = rules.late_faults(th, s, int(now[k]))
+        out_i[k, 9] = rules.late_command(th, s, 0, int(now[k]))
+        out_i[k, 10] = rules.late_command(th, s, 1, int(now[k]))
         out_i[k, 4] = rules.update_zone(th, s, d)
         out_i[k, 5] = rules.sensor_key_axes(keys)
-        out_f[k, 0] = rules.output_v(th, s, 0, int(blocked[k, 0]))
-        out_f[k, 1] = rules.output_v(th, s, 1, int(blocked[k, 1]))
+        out_f[k, 0] = rules.output_v(th, s, 0, int(blocked[k, 0]), int(now[k]))
+        out_f[k, 1] = rules.output_v(th, s, 1, int(blocked[k, 1]), int(now[k]))
         out_f[k, 2] = d.jump_deviation if keys & (1 << rules.ENCODER_JUMP) else 0.0
         out_f[k, 3] = d.speed_rpm if keys & (1 << rules.OVERSPEED) else 0.0
         out_f[k, 4] = d.braking_m if out_i[k, 4] else 0.0
@@ -114,13 +125,26 @@ _step = st.tuples(
         # rotary: inside and beyond the stall band both ways, the centre, refused
         st.sampled_from([6.0, 5.0, 5.3, 5.31, 4.7, 4.69, 2.0, 10.0, math.nan]),
     ),
-    st.sampled_from([0, 0, 0, -3, 1, -5, -6, 40]),  # stamp offset [periods]: older, future, expired
-    st.sampled_from([1, 1, 1, 6, 30]),  # output tick [periods after the sample]
+    # stamp offset [periods]: older, future, expired (short and default watchdogs)
+    st.sampled_from([0, 0, 0, -3, 1, -5, -6, -21, -50, -51, 40]),
+    # output tick [periods after the sample]: fresh, late within and beyond the holds and
+    # the watchdogs (short and default)
+    st.sampled_from([1, 1, 1, 2, 3, 4, 6, 21, 22, 30, 50, 51]),
     st.tuples(st.integers(0, 1), st.integers(0, 1)),  # axis blocked (latched, e-stop)
+    # a command sent for the axis this step (a late controller sends none)
+    st.tuples(st.sampled_from([1, 1, 0]), st.sampled_from([1, 1, 0])),
 )
 _params = st.sampled_from(
     [
         P,
+        # the late-command policies: ramp and trip at the defaults, short clocks, no ramp
+        dataclasses.replace(P, late_policy="ramp"),
+        dataclasses.replace(P, late_policy="trip"),
+        dataclasses.replace(
+            P, late_policy="ramp", watchdog_ms=5.0, late_hold_ms=3.0, late_ramp_ms=2.0
+        ),
+        dataclasses.replace(P, late_policy="ramp", late_ramp_ms=0.0, late_hold_ms=0.0),
+        dataclasses.replace(P, watchdog_ms=5.0, late_hold_ms=1.0, stuck_ms=3.0),
         dataclasses.replace(P, extend_above_neutral=False, max_accel_rad_s2=0.0, stuck_ms=3.0),
         dataclasses.replace(P, stall_ms=2.0, velocity_window_ms=3.0, speed_window_ms=1.0),
         # angle soft limits at ±25° (≈ 278 counts), the bidirectional stall rule, short clocks
@@ -162,7 +186,8 @@ def _arrays(steps):
     u_t = np.stack([(k + off) * T_NS, k * T_NS], axis=1)
     now = (k + np.array([s[6] for s in steps], dtype=np.int64)) * T_NS
     blocked = np.array([s[7] for s in steps], dtype=np.int64)
-    return f, c, volts, have, u, u_t, now, blocked
+    sent = np.array([s[8] for s in steps], dtype=np.int64)
+    return f, c, volts, have, u, u_t, now, blocked, sent
 
 
 def _same(a, b) -> bool:
@@ -178,7 +203,7 @@ def test_compiled_and_python_rules_decide_the_same(params, steps):
     th.store(arrs[0][0])
     data = _arrays(steps)
     n = len(steps)
-    out_i, out_f = np.zeros((n, 8), dtype=np.int64), np.zeros((n, 7))
+    out_i, out_f = np.zeros((n, 11), dtype=np.int64), np.zeros((n, 7))
     _drive(*arrs, *data, out_i, out_f)
     want_i, want_f = _python(*py, *data)
     assert np.array_equal(out_i, want_i)
@@ -265,7 +290,7 @@ def _run_both(params, steps):
     th.store(arrs[0][0])
     data = _arrays(steps)
     n = len(steps)
-    out_i, out_f = np.zeros((n, 8), dtype=np.int64), np.zeros((n, 7))
+    out_i, out_f = np.zeros((n, 11), dtype=np.int64), np.zeros((n, 7))
     _drive(*arrs, *data, out_i, out_f)
     want_i, want_f = _python(*py, *data)
     assert np.array_equal(out_i, want_i)
@@ -290,7 +315,7 @@ def test_the_rotary_rules_act_alike_in_a_stream_made_to_reach_them():
 
     def step(dc, u_rot, p_m1=3.0e5):
         f = (2.5e5, 2.4e5, p_m1, 0.0, 0.0, 0.0)
-        return (f, dc, (2.0, 2.0, 2.0, 2.0), True, (5.0, u_rot), 0, 1, (0, 0))
+        return (f, dc, (2.0, 2.0, 2.0, 2.0), True, (5.0, u_rot), 0, 1, (0, 0), (1, 1))
 
     # forward at 20 counts/ms (300 rpm) into the +25° zone, on past it (trip), back out
     steps = [step(20, 8.0) for _ in range(20)]
@@ -315,3 +340,33 @@ def test_the_rotary_rules_act_alike_in_a_stream_made_to_reach_them():
     assert not stall[49:64].any()
     assert stall[64:].tolist() == [0, 0, 0, 1, 1, 1, 1, 1]  # forward: from the inlet high
     assert set(out_f[stall == 1, 6]) == {2.0, 8.0}  # the driving voltage, each way
+
+
+@pytest.mark.parametrize("policy", ["hold", "ramp", "trip"])
+def test_the_late_rules_act_alike_in_a_stream_made_to_reach_them(policy):
+    """The linear controller falls silent for longer than the watchdog after 5 fresh ticks:
+    held or ramped, then 5 V, the trip bit, the counts, compiled = Python."""
+    params = dataclasses.replace(P, late_policy=policy)
+    hold, wd = round(params.late_hold_ms), round(params.watchdog_ms)
+
+    def step(sent):
+        f = (2.5e5, 2.4e5, 1.8e5, 0.0, 0.0, 0.0)
+        return (f, 0, (2.0, 2.0, 2.0, 2.0), True, (9.0, 6.0), 0, 1, (0, 0), (sent, 1))
+
+    steps = [step(1) for _ in range(5)] + [step(0) for _ in range(wd + 5)]
+    keys, out_f = _run_both(params, steps)
+    lin = out_f[5:, 0]  # late by 1, 2, ... periods
+    ramp = params.late_ramp_ms
+    want = {
+        "hold": [9.0] * hold,
+        "ramp": [9.0 - 4.0 * min(m / ramp, 1.0) for m in range(1, hold + 1)],
+        "trip": [5.0] * hold,  # 5 V from the first late tick (and latched by the caller)
+    }[policy]
+    assert lin[:hold] == pytest.approx(want, abs=1e-12)
+    assert lin[hold:].tolist() == [5.0] * (len(lin) - hold)
+    assert out_f[:, 1].tolist() == [6.0] * len(steps)  # the rotary answers on time
+    assert keys[:, 8].tolist() == [0] * 5 + [1 if policy == "trip" else 0] * (wd + 5)
+    assert keys[:, 9].tolist() == [rules.LATE_NO] * 5 + [
+        {"hold": rules.LATE_HOLD, "ramp": rules.LATE_RAMP, "trip": rules.LATE_CLOSED}[policy]
+    ] * hold + [rules.LATE_CLOSED] * (wd + 5 - hold)
+    assert keys[:, 3].tolist() == [0] * (5 + wd - 1) + [1] * 6  # the watchdog from the wd-th

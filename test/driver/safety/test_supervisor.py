@@ -18,6 +18,7 @@ from pneu_msgs_py.params.core import ParamError, from_dict
 
 CONFIG = Path(__file__).resolve().parents[3] / "config"
 T_NS = 1_000_000
+WD = round(SafetyParams().watchdog_ms)  # the default watchdog in 1 ms periods
 LIVE_VOLTS = (2.0, 1.5, 3.0, 2.5)
 
 
@@ -85,10 +86,12 @@ def test_watchdog_exactly_at_threshold_then_latched_until_acknowledged():
     r.tick()
     sup = r.sup
     stamp = r.k * T_NS  # the linear axis' last command answers this sample
-    for _ in range(4):  # the linear controller falls silent, the rotary one goes on
+    for _ in range(WD - 1):  # the linear controller falls silent, the rotary one goes on
         out = r.tick(command=("rotary",))
-    assert out == (7.0, 6.0)  # outputs at stamp + 5 T: age == watchdog_ms, still fresh
-    assert sup.outputs(stamp + 5 * T_NS + 1) == (5.0, 6.0)  # 1 ns older: linear safe
+    # outputs at stamp + WD·T: age == watchdog_ms, not latched (5 V since the hold ended)
+    assert out == (5.0, 6.0) and sup.status["linear"].state == "OK"
+    assert not rules(sup.events(), ERROR)
+    assert sup.outputs(stamp + WD * T_NS + 1) == (5.0, 6.0)  # 1 ns older: linear latched
     ev = sup.events()
     assert ("linear", "watchdog") in rules(ev, ERROR)
     assert sup.status["linear"].causes == ("watchdog",)
@@ -104,7 +107,8 @@ def test_watchdog_acknowledged_without_commands_waits_for_them():
     r = Rig()
     r.tick()
     sup = r.sup
-    assert r.run(20, command=()) == (5.0, 5.0)
+    assert r.run(WD + 1, command=()) == (5.0, 5.0)
+    assert sup.status["linear"].causes == ("watchdog",)
     ok, _ = sup.acknowledge("linear")
     assert ok
     assert sup.status["linear"].causes == ("no_command",)
@@ -132,20 +136,20 @@ def test_a_command_for_no_sample_taken_or_older_than_the_watchdog_is_refused_and
     assert "stamped after the newest sample" in ev[0].message
     # the controller's next command is taken (the rogue stamp did not become the newest)
     assert r.tick(u=(4.0, 6.0)) == (4.0, 6.0)
-    # a replay: the command answering a sample older than the watchdog (5 ms)
-    r.run(5)
-    old = (r.k - 6) * T_NS
+    # a replay: the command answering a sample older than the watchdog
+    r.run(WD)
+    old = (r.k - WD - 1) * T_NS
     sup.command("rotary", 9.0, old)
     assert sup.counters["expired_commands"] == 1
     assert sup.outputs(r.k * T_NS + T_NS) == (7.0, 6.0)
     assert rules(sup.events(), WARN) == [("rotary", "command_stamp")]
     # the rogue commands keep nothing alive: silent controllers still trip the watchdog
-    for j in range(8):
+    for j in range(WD + 3):
         sup.command("linear", 10.0, (r.k + 1 + j) * T_NS + 10**12)
         out = r.tick(command=())
     assert out == (5.0, 5.0)
     assert sup.status["linear"].causes == ("watchdog",)
-    assert sup.counters["future_commands"] == 10
+    assert sup.counters["future_commands"] == WD + 5
 
 
 def test_soft_limit_at_rest_exactly_at_the_margin():

@@ -265,3 +265,52 @@ def test_a_supervisor_for_another_plumbing_than_the_twins_is_refused():
     ):
         RigCycle(plant, supervisor=SafetySupervisor(SafetyParams()))
     RigCycle(plant, supervisor=SafetySupervisor(SafetyParams(rotary_plumbing="bidirectional")))
+
+
+class QuietPlant(FakePlant):
+    """Plausible samples for a SafetySupervisor (at rest, live sensor noise); records the
+    applied commands."""
+
+    def _sample(self, k, x, omega):
+        w = 10.0 * (k % 3)
+        return SensorSample(
+            k, k * T_NS, 2.5e5 + w, 2.4e5 - w, 1.8e5 + w, 1e-6 * (k % 2), 0.0, 0.0, 0
+        )
+
+
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+def test_the_sim_writes_the_late_policy_and_counts_it(mode):
+    """A controller that misses k ticks in a row: the twin integrates its last command for
+    late_hold_ms (hold), then 5 V, and the next answer at once, not latched; the
+    supervisor's counts are the sim's counters (its /diagnostics status values)."""
+    from pneu_driver.safety import SafetyParams, SafetySupervisor
+
+    p = SafetyParams()
+    hold = round(p.late_hold_ms)
+    k = hold + 5
+    plant = QuietPlant()
+    sup = SafetySupervisor(p, sample_time_s=plant.T)
+    core = RigCycle(plant, axes=("linear",), mode=mode, supervisor=sup)
+    s = core.reset()
+    for _ in range(3):
+        core.offer("linear", s.stamp_ns, 7.0)
+        s = core.advance()
+    for _ in range(k):  # no answer (lockstep: the node's timeout fires each time)
+        s = core.advance()
+    core.offer("linear", s.stamp_ns, 3.0)
+    core.advance()
+    core.advance()
+    applied = [u for u, _ in plant.applied]
+    # step j runs under the tick-j output: the answer to sample j-1, late by m periods at
+    # j = 3 + m (the last answer is to sample 2)
+    assert applied[:4] == [5.0, 7.0, 7.0, 7.0]
+    assert applied[4 : 4 + hold] == [7.0] * hold  # late by 1..hold ms: held
+    assert applied[4 + hold : 4 + k] == [5.0] * (k - hold)  # beyond the hold: closed
+    assert applied[4 + k] == 3.0  # the answer to the newest sample: written at once
+    assert not [e for e in sup.events() if e.level == "ERROR"]
+    c = core.counters()
+    # the k ticks, and the last one (the last advance's sample got no answer either)
+    late = (c["linear.late_ticks"], c["linear.held_ticks"], c["linear.ramped_ticks"])
+    assert late == (k + 1, hold + 1, 0)
+    assert c["rotary.late_ticks"] == 0 and c["future_commands"] == 0  # the driver's keys too
+    assert c[("timeouts" if mode == "lockstep" else "missed") + ".linear"] == k + 1

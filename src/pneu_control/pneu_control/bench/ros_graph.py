@@ -11,8 +11,11 @@ chosen deployment and executor, samples each process's CPU time from
 - ``turnaround.<axis>`` p50 / p99 / max: from a sample's publication to the
   publication of the command answering it, both from the bag's
   ``publish_time`` (the publishers' source timestamps, one clock);
+- ``late_ticks.<axis>``, ``held_ticks.<axis>``, ``ramped_ticks.<axis>``: the supervisor's
+  count of ticks with a late command and of those written held or ramped (its
+  ``late_policy``, DESIGN §14);
 - ``safety_trips.<axis>`` and ``first_trip_s.<axis>``: the supervisor's ERROR transitions
-  (e.g. its 5 ms command watchdog): a trip holds the valve at 5 V until acknowledged, so
+  (e.g. its command watchdog): a trip holds the valve at 5 V until acknowledged, so
   a run with one is not a run at 1 kHz whatever the missed count says;
 - ``cpu.<process>``: CPU time / wall time while the run was in its steady part.
 
@@ -203,6 +206,8 @@ def measure(
         missed = int(sim.get(f"missed.{axis}", "0"))
         res[f"missed.{axis}"] = missed
         res[f"missed_pct.{axis}"] = 100.0 * missed / max(res["ticks"], 1)
+        for name in ("late_ticks", "held_ticks", "ramped_ticks"):
+            res[f"{name}.{axis}"] = int(sim.get(f"{axis}.{name}", "0"))
         ta = _turnaround_us(data, axis)
         for q in (50, 99):
             res[f"turnaround_p{q}_us.{axis}"] = float(np.percentile(ta, q)) if ta.size else None

@@ -33,8 +33,9 @@ N_SP = 29
 ) = range(N_SP)  # fmt: skip
 (
     SI_T_NS, SI_WD_NS, SI_STUCK_NS, SI_STALL_NS, SI_NXW, SI_NCW, SI_CPR, SI_SLACK, SI_REVERSE,
-) = range(9)  # fmt: skip
-N_SI = 9
+    SI_LATE_POLICY, SI_LATE_HOLD_NS, SI_LATE_RAMP_NS,
+) = range(12)  # fmt: skip
+N_SI = 12
 
 # ---------------------------------------------------------------- kernel status
 OK = 0

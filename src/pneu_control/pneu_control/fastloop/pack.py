@@ -90,6 +90,8 @@ def _supervisor(sup: Any, scaling: Any, sp: np.ndarray, si: np.ndarray) -> None:
     si[L.SI_NXW], si[L.SI_NCW] = th["velocity_window"], th["speed_window"]
     si[L.SI_CPR], si[L.SI_SLACK] = p.counts_per_rev, p.encoder_slack_counts
     si[L.SI_REVERSE] = r.stall_reverse
+    si[L.SI_LATE_POLICY], si[L.SI_LATE_HOLD_NS] = th["late_policy"], th["late_hold_ns"]
+    si[L.SI_LATE_RAMP_NS] = th["late_ramp_ns"]
 
 
 def pack_spec(spec: Any, sup: Any | None, scaling: Any | None) -> Packed:

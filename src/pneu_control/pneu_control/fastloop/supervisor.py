@@ -1,7 +1,7 @@
 """The supervisor in the compiled loop: :mod:`pneu_driver.safety.rules` compiled in, no copy.
 
-Every decision (sample rules, command check, watchdog, soft limits, output) is a
-rule of :mod:`pneu_driver.safety.rules`, the same source
+Every decision (sample rules, command check, late-command policy, watchdog, soft
+limits, output) is a rule of :mod:`pneu_driver.safety.rules`, the same source
 :class:`~pneu_driver.safety.supervisor.SafetySupervisor` runs in Python, here on
 one numba record holding the rules' thresholds, state and findings. What is
 left here is what only the compiled loop needs:
@@ -9,9 +9,10 @@ left here is what only the compiled loop needs:
 - the latches as bits (a fault latches its axis for the rest of the run: the
   runner never acknowledges) and the last key mask of each group, as the Python
   groups are dicts of keys;
-- the event flag ``sn[SN_EVENT]``: a changed key mask, a zone change or any
-  command outcome the rules report, so that the caller knows the last cycle at
-  which the Python supervisor emits an event or counts something. The events
+- the event flag ``sn[SN_EVENT]``: a changed key mask, a zone change, any
+  command outcome the rules report or a late tick counted, so that the caller
+  knows the last cycle at which the Python supervisor emits an event or counts
+  something. The events
   themselves are not re-implemented: :mod:`pneu_control.experiment.compiled`
   replays the Python supervisor over the recorded samples and commands up to that cycle.
 
@@ -30,6 +31,9 @@ from pneu_msgs_py.params.records import RecordType
 from pneu_control.fastloop.layout import (
     JIT,
     SI_CPR,
+    SI_LATE_HOLD_NS,
+    SI_LATE_POLICY,
+    SI_LATE_RAMP_NS,
     SI_NCW,
     SI_NXW,
     SI_REVERSE,
@@ -78,7 +82,10 @@ SN_LOADED = 1  # the thresholds are in the record
 SN_SENSOR = 2  # the sensor keys present (rules.SENSOR_KEYS bits)
 SN_WATCHDOG = 3  # the watchdog keys present (bit = axis)
 SN_LATCH = 4  # the latched axes (bit = axis)
-N_SN = 5
+SN_LATE = 5  # the trip policy's late_command keys present (bit = axis)
+SN_LATE_LIN = 6  # the late ticks counted so far, linear (a count is an event)
+SN_LATE_ROT = 7  # ... rotary
+N_SN = 8
 
 
 def sup_new(si: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -97,6 +104,9 @@ def _load(sp, si, sf, sn):
     r = sf[0]
     r.T_ns = si[SI_T_NS]
     r.watchdog_ns = si[SI_WD_NS]
+    r.late_policy = si[SI_LATE_POLICY]
+    r.late_hold_ns = si[SI_LATE_HOLD_NS]
+    r.late_ramp_ns = si[SI_LATE_RAMP_NS]
     r.stuck_ns = si[SI_STUCK_NS]
     r.stall_ns = si[SI_STALL_NS]
     r.n_xw = si[SI_NXW]
@@ -133,7 +143,8 @@ def _load(sp, si, sf, sn):
 
 @njit(**JIT)
 def _group(sn, slot, keys, axes):
-    """``_update_group``: a changed key set is an event; ``axes`` (newly present keys') latch."""
+    """``_update_group``: a changed key set (or count) is an event; ``axes`` (newly present
+    keys') latch."""
     if keys != sn[slot]:
         sn[SN_EVENT] = 1
         sn[SN_LATCH] |= axes
@@ -162,13 +173,20 @@ def sup_command(sf, sn, axis, u, stamp):
 
 @njit(**JIT)
 def sup_outputs(sp, si, sf, sn, now):
-    """``outputs(now_ns)``: (linear, rotary) V after the watchdog, latches and the stroke and
-    angle soft limits."""
+    """``outputs(now_ns)``: (linear, rotary) V after the late-command policy, the watchdog,
+    latches and the stroke and angle soft limits. A late tick counted is an event (the
+    replay then counts it)."""
     _load(sp, si, sf, sn)
     r = sf[0]
-    late = rules.watchdog_faults(r, r, now)
-    _group(sn, SN_WATCHDOG, late, late & ~sn[SN_WATCHDOG])
+    gone = rules.watchdog_faults(r, r, now)
+    _group(sn, SN_WATCHDOG, gone, gone & ~sn[SN_WATCHDOG])
+    late = rules.late_faults(r, r, now)
+    _group(sn, SN_LATE, late, late & ~sn[SN_LATE])
     if rules.update_zone(r, r, r):
         sn[SN_EVENT] = 1
     latch = sn[SN_LATCH]
-    return rules.output_v(r, r, 0, latch & 1), rules.output_v(r, r, 1, latch & 2)
+    u_l = rules.output_v(r, r, 0, latch & 1, now)
+    u_r = rules.output_v(r, r, 1, latch & 2, now)
+    _group(sn, SN_LATE_LIN, r.late_ticks[0], 0)
+    _group(sn, SN_LATE_ROT, r.late_ticks[1], 0)
+    return u_l, u_r

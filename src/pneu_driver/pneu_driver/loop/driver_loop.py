@@ -7,7 +7,8 @@ One cycle (DESIGN §3, k = tick, T = 1 ms):
 2. the supervisor checks it, ``on_sample(sample)`` publishes it;
 3. wait (at most ``command_deadline_us`` after the tick) for the expected
    controllers' commands answering sample k, take the newest of each axis;
-4. the supervisor turns them into the voltages for tick k+1, which are written:
+4. the supervisor turns them into the voltages for tick k+1 (an axis without a
+   fresh command: its ``late_policy``, DESIGN §14), which are written:
    hardware AO on the sample clock emits them at clock k+1; software pacing
    holds them and writes them at the deadline of tick k+1, just before reading
    sample k+1 -- a one-sample transport delay either way.
@@ -237,7 +238,8 @@ class DriverLoop:
             self._on_events(events)
 
     def command_counts(self) -> dict[str, str]:
-        """Commands not taken: the supervisor's counters and those stamped for no sample."""
+        """The supervisor's counters (commands not taken, trips, per axis the late ticks and
+        those held or ramped) and the commands stamped for no sample."""
         with self._lock:
             out = {k: str(v) for k, v in self._sup.counters.items()}
         for axis, n in self.commands.future.items():

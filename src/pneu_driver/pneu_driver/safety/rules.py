@@ -9,13 +9,14 @@ into numba callers) on three records:
 - ``s``, :data:`STATE`: what the rules remember (the velocity and speed windows,
   the last encoder step, the frozen values and since when, the stall clock, the
   stroke and angle soft-limit zones, the last command and the last output per axis,
-  the pending refusals);
+  the pending refusals, the late, held and ramped ticks per axis);
 - ``d``, :data:`FINDINGS`: the numbers behind a rule that fired this call (for
   the message), written only when it fires (``nf_fields``/``nf_volts`` always).
 
 A rule returns a decision, never a message: the fault keys present as a bit mask
 (:data:`SENSOR_KEYS`; bit ``a`` = axis ``a`` for the watchdog), or a code of what
-changed (:func:`update_zone`, :func:`command`). Two callers, one source:
+changed (:func:`update_zone`, :func:`command`), or what a late command becomes
+(:func:`late_command`; DESIGN §14). Two callers, one source:
 :class:`~pneu_driver.safety.supervisor.SafetySupervisor` (events, messages,
 latches, acknowledge) and the compiled closed loop's adapter
 (:mod:`pneu_control.fastloop.supervisor`: latches as bits, the event flag).
@@ -44,6 +45,7 @@ __all__ = [
     "ANALOG",
     "FIELDS",
     "FINDINGS",
+    "LATE_POLICIES",
     "SENSOR_KEYS",
     "STATE",
     "THRESHOLDS",
@@ -55,6 +57,8 @@ __all__ = [
     "fresh_array",
     "inlet_vented",
     "jump_allowance",
+    "late_command",
+    "late_faults",
     "non_finite_fields",
     "output_v",
     "sample_faults",
@@ -119,6 +123,14 @@ CMD_STALE = 4  # older than the last accepted one: ignored
 CMD_FIRST = 8  # the axis's first accepted command (or the first after an acknowledge)
 CMD_FUTURE = 16  # stamped for a sample not yet taken (or before any sample): not taken
 CMD_EXPIRED = 32  # answering a sample older than the watchdog: not taken
+# the late-command policy (SafetyParams.late_policy: its code is the index here)
+LATE_POLICIES = ("hold", "ramp", "trip")
+POLICY_HOLD, POLICY_RAMP, POLICY_TRIP = 0, 1, 2
+# what late_command makes of an axis' last command at a tick
+LATE_NO = 0  # fresh (one period old: it answers the newest sample), or no command yet
+LATE_HOLD = 1  # late, within late_hold_ns: the last command is written (hold)
+LATE_RAMP = 2  # late, within late_hold_ns: ramped toward SAFE_V (ramp)
+LATE_CLOSED = 3  # late beyond late_hold_ns, or the trip policy: SAFE_V
 
 # ------------------------------------------------------------------ records
 THRESHOLDS = RecordType(
@@ -126,6 +138,9 @@ THRESHOLDS = RecordType(
     [
         ("T_ns", "i"),  # sample period
         ("watchdog_ns", "i"),
+        ("late_policy", "i"),  # POLICY_HOLD | POLICY_RAMP | POLICY_TRIP
+        ("late_hold_ns", "i"),
+        ("late_ramp_ns", "i"),
         ("stuck_ns", "i"),
         ("stall_ns", "i"),
         ("x_hi", "f"),  # soft limits [m]
@@ -194,6 +209,9 @@ STATE = RecordType(
         ("cmd_t", ("i", 2)),
         ("refused", "i"),  # bit a: axis a's last command was refused (output_sanity present)
         ("u_out", ("f", 2), [SAFE_V, SAFE_V]),  # per axis: the last output (held since) [V]
+        ("late_ticks", ("i", 2)),  # per axis: ticks with a late command, until the watchdog's
+        ("held_ticks", ("i", 2)),  # ... of them written held (hold) / ramped (ramp)
+        ("ramped_ticks", ("i", 2)),
     ],
 )
 FINDINGS = RecordType(
@@ -237,6 +255,9 @@ def thresholds(params: Any, sample_time_s: float) -> Record:
     return THRESHOLDS.new(
         T_ns=round(sample_time_s * 1e9),
         watchdog_ns=round(p.watchdog_ms * 1e6),
+        late_policy=LATE_POLICIES.index(p.late_policy),
+        late_hold_ns=round(p.late_hold_ms * 1e6),
+        late_ramp_ns=round(p.late_ramp_ms * 1e6),
         stuck_ns=round(p.stuck_ms * 1e6),
         stall_ns=round(p.stall_ms * 1e6),
         x_hi=x_hi,
@@ -590,6 +611,51 @@ def watchdog_faults(th, s, now):
 
 
 @kernel
+def late_command(th, s, axis, now):
+    """What the late-command policy makes of axis ``axis``'s last command at the tick whose
+    output takes effect at ``now`` (a ``LATE_*`` code; pure).
+
+    Fresh: one period old (``now`` − its stamp ≤ ``T_ns``), i.e. the answer to the newest
+    sample the controller could answer (DESIGN §3). Older, by ``late`` = age − ``T_ns``:
+    within ``late_hold_ns`` it is held (``hold``) or ramped (``ramp``), beyond it (and at
+    once with ``trip``) the output is SAFE_V. Not latched here: :func:`late_faults` (trip)
+    and :func:`watchdog_faults` (gone) latch (DESIGN §14).
+    """
+    if not (s.cmd_have[axis] and s.have_sample):
+        return LATE_NO
+    late = now - s.cmd_t[axis] - th.T_ns
+    if late <= 0:
+        return LATE_NO
+    if th.late_policy == POLICY_TRIP or late > th.late_hold_ns:
+        return LATE_CLOSED
+    if th.late_policy == POLICY_RAMP:
+        return LATE_RAMP
+    return LATE_HOLD
+
+
+@kernel
+def late_faults(th, s, now):
+    """Bit a: axis a's command is late at ``now`` under the ``trip`` policy (latched)."""
+    keys = 0
+    if th.late_policy == POLICY_TRIP:
+        for a in range(2):
+            if late_command(th, s, a, now) != LATE_NO:
+                keys |= 1 << a
+    return keys
+
+
+@kernel
+def ramp_v(th, s, axis, now):
+    """The ``ramp`` policy's output: the last command u_c moved toward SAFE_V linearly in the
+    lateness, u_c + (SAFE_V − u_c)·min(late / late_ramp_ns, 1) [V]."""
+    u = s.cmd_u[axis]
+    late = now - s.cmd_t[axis] - th.T_ns
+    if late >= th.late_ramp_ns:
+        return SAFE_V
+    return u + (SAFE_V - u) * (late / th.late_ramp_ns)
+
+
+@kernel
 def zone_changes(on_hi, on_lo, pos, vel, brake, lo, hi, hyst):
     """One axis' pair of soft-limit zones, entered where the reach (``pos`` plus the braking
     way ``brake`` in the direction of ``vel``) meets a limit, left ``hyst`` back (not
@@ -663,10 +729,16 @@ def update_zone(th, s, d):
 
 
 @kernel
-def output_v(th, s, axis, blocked):
-    """The voltage to write for ``axis`` (kept in ``s.u_out``): SAFE_V while ``blocked`` (a
-    latched fault, the e-stop), before its first command or the first sample; a command
-    driving further into an active stroke soft-limit zone is held at SAFE_V.
+def output_v(th, s, axis, blocked, now):
+    """The voltage to write for ``axis`` at the tick taking effect at ``now`` (kept in
+    ``s.u_out``): SAFE_V while ``blocked`` (a latched fault, the e-stop), before its first
+    command or the first sample; a late command as the policy says (:func:`late_command`:
+    held, ramped or SAFE_V); a command driving further into an active stroke soft-limit zone
+    is held at SAFE_V, the held and ramped ones included.
+
+    Counted per axis (call once per axis and tick): ``late_ticks``, a late command not yet
+    older than the watchdog (blocked or not); ``held_ticks`` / ``ramped_ticks``, those
+    written held or ramped.
 
     The rotary axis in an active angle zone: no output turning further, SAFE_V included,
     is written; it is held at ``rot_idle_v``, the output that does not drive the motor
@@ -674,8 +746,18 @@ def output_v(th, s, axis, blocked):
     the closed centre's leakage turns the motor on at 35-55 rpm on the nominal twin).
     """
     u = SAFE_V
+    late = late_command(th, s, axis, now)
+    if late != LATE_NO and now - s.cmd_t[axis] <= th.watchdog_ns:
+        s.late_ticks[axis] += 1
     if not blocked and s.cmd_have[axis] and s.have_sample:
         u = s.cmd_u[axis]
+        if late == LATE_HOLD:
+            s.held_ticks[axis] += 1
+        elif late == LATE_RAMP:
+            s.ramped_ticks[axis] += 1
+            u = ramp_v(th, s, axis, now)
+        elif late == LATE_CLOSED:
+            u = SAFE_V
         if axis == 0:
             push = (u - SAFE_V) * th.u_toward_hi  # > 0: drives toward +x
             if (s.zone_hi and push > 0.0) or (s.zone_lo and push < 0.0):

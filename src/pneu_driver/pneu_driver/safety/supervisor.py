@@ -9,8 +9,19 @@ per rig, stepped from one thread:
    a stalled rotation, the stroke and angle soft-limit trips);
 2. ``command(axis, u, stamp_ns)`` -- a controller's command arrived; NaN or a
    value outside 0–10 V is refused (never written) and trips the axis;
-3. ``outputs(now_ns)`` -- the two voltages to write, after the watchdog, the
-   latched faults, the e-stop and the stroke and angle soft limits.
+3. ``outputs(now_ns)`` -- the two voltages to write, after the late-command
+   policy, the watchdog, the latched faults, the e-stop and the stroke and angle
+   soft limits.
+
+A command late for a tick (older than one period when the output takes effect: the
+controller has not answered the newest sample) is dealt with by ``late_policy``
+(DESIGN §14): ``hold`` writes the last command, ``ramp`` moves it linearly to 5 V
+over ``late_ramp_ms``, for at most ``late_hold_ms``, then 5 V (not latched) until a
+fresh command; ``trip`` takes the axis safe at the first late tick (latched,
+``late_command``). Whatever the policy, the watchdog latches an axis whose controller
+is gone (no fresh command for ``watchdog_ms``), and the soft limits act on the held
+or ramped output as on any. Counted per axis: ``<axis>.late_ticks`` (until the
+watchdog's), ``<axis>.held_ticks``, ``<axis>.ramped_ticks``.
 
 Faults latch per axis: the valve stays at its safe value (5 V, closed centre)
 until the condition is gone *and* :meth:`SafetySupervisor.acknowledge` (or
@@ -116,7 +127,7 @@ class SafetySupervisor:
         self._stamp_warned: set[tuple[str, str]] = set()
         self._publishers: dict[str, int] = {}
         self._events: deque[SafetyEvent] = deque(maxlen=10000)
-        self.counters = {
+        self._counts = {
             "refused_commands": 0,
             "stale_commands": 0,
             "future_commands": 0,
@@ -308,6 +319,18 @@ class SafetySupervisor:
         """
         return rules.jump_allowance(self._th, dt_ns)
 
+    @property
+    def counters(self) -> dict[str, int]:
+        """What was refused, ignored, tripped or dropped, and per axis the late ticks and
+        those written held or ramped (the rules' state), as one flat dict (a copy)."""
+        st = self._s
+        out = dict(self._counts)
+        for a, axis in enumerate(AXES):
+            out[f"{axis}.late_ticks"] = st.late_ticks[a]
+            out[f"{axis}.held_ticks"] = st.held_ticks[a]
+            out[f"{axis}.ramped_ticks"] = st.ramped_ticks[a]
+        return out
+
     def command(self, axis: str, u: float, stamp_ns: int) -> None:
         """A controller's command for ``axis`` arrived, answering the sample stamped ``stamp_ns``.
 
@@ -322,7 +345,7 @@ class SafetySupervisor:
         done = rules.command(self._th, self._s, a, float(u), int(stamp_ns))
         if done & (rules.CMD_FUTURE | rules.CMD_EXPIRED):
             kind = "future" if done & rules.CMD_FUTURE else "expired"
-            self.counters[f"{kind}_commands"] += 1
+            self._counts[f"{kind}_commands"] += 1
             if (axis, kind) not in self._stamp_warned:
                 self._stamp_warned.add((axis, kind))
                 why = (
@@ -340,7 +363,7 @@ class SafetySupervisor:
             return
         group = _SANITY_GROUP[axis]
         if done & rules.CMD_REFUSED:
-            self.counters["refused_commands"] += 1
+            self._counts["refused_commands"] += 1
             msg = f"{axis} command {u!r} V refused (allowed [{U_MIN_V:g}, {U_MAX_V:g}] V, finite)"
             self._update_group(
                 group, {(axis, "output_sanity"): (msg, {"command_v": u})}, self._now_ns
@@ -349,7 +372,7 @@ class SafetySupervisor:
         if done & rules.CMD_REFUSAL_GONE:
             self._update_group(group, {}, self._now_ns)
         if done & rules.CMD_STALE:
-            self.counters["stale_commands"] += 1
+            self._counts["stale_commands"] += 1
             return
         if done & rules.CMD_FIRST:
             self._emit(axis, "command", OK, f"{axis} commands arriving", {"command_v": u})
@@ -360,17 +383,10 @@ class SafetySupervisor:
         now = int(now_ns)
         self._now_ns = now
         th, st = self._th, self._s
-        late = rules.watchdog_faults(th, st, now)
-        if late or self._groups.get("watchdog"):
-            present = {}
-            for a, axis in enumerate(AXES):
-                if late >> a & 1:
-                    age_ms = (now - st.cmd_t[a]) * 1e-6
-                    present[(axis, "watchdog")] = (
-                        f"no fresh {axis} command for {age_ms:.4g} ms (> watchdog_ms = {self.params.watchdog_ms:g})",
-                        {"age_ms": age_ms},
-                    )
-            self._update_group("watchdog", present, now)
+        gone = rules.watchdog_faults(th, st, now)
+        late = rules.late_faults(th, st, now)
+        if gone or late or self._groups.get("watchdog"):
+            self._update_group("watchdog", self._command_faults(gone, late, now), now)
         else:
             self._groups.setdefault("watchdog", {})
         changed = rules.update_zone(th, st, self._d)
@@ -378,9 +394,29 @@ class SafetySupervisor:
             self._zone_events(changed, now)
         estop = self._estop is not None
         return (
-            rules.output_v(th, st, 0, estop or bool(self._latched[AXES[0]])),
-            rules.output_v(th, st, 1, estop or bool(self._latched[AXES[1]])),
+            rules.output_v(th, st, 0, estop or bool(self._latched[AXES[0]]), now),
+            rules.output_v(th, st, 1, estop or bool(self._latched[AXES[1]]), now),
         )
+
+    def _command_faults(
+        self, gone: int, late: int, now: int
+    ) -> dict[tuple[str, str], tuple[str, dict[str, Any]]]:
+        """The watchdog's keys (``gone``) and the trip policy's (``late``), with messages."""
+        present = {}
+        for a, axis in enumerate(AXES):
+            age_ms = (now - self._s.cmd_t[a]) * 1e-6
+            if late >> a & 1:
+                present[(axis, "late_command")] = (
+                    f"{axis} command late: {age_ms:.4g} ms old at the tick, the newest sample "
+                    f"not answered (late_policy: trip)",
+                    {"age_ms": age_ms},
+                )
+            if gone >> a & 1:
+                present[(axis, "watchdog")] = (
+                    f"no fresh {axis} command for {age_ms:.4g} ms (> watchdog_ms = {self.params.watchdog_ms:g})",
+                    {"age_ms": age_ms},
+                )
+        return present
 
     def _zone_events(self, changed: int, now: int) -> None:
         """The soft-limit transitions :func:`rules.update_zone` reported, as events."""
@@ -488,7 +524,7 @@ class SafetySupervisor:
         """Latch every valve safe until :meth:`reset` succeeds."""
         if self._estop is None:
             self._estop = str(reason) or "e-stop"
-            self.counters["trips"] += 1
+            self._counts["trips"] += 1
             self._emit(
                 "all",
                 "estop",
@@ -500,8 +536,8 @@ class SafetySupervisor:
     def acknowledge(self, axis: str) -> tuple[bool, str]:
         """Clear ``axis``'s latched faults if none of them is still present.
 
-        A tripped watchdog needs no fresh command to be acknowledged: the axis
-        then waits (valve safe) until commands resume. The e-stop needs :meth:`reset`.
+        A tripped watchdog (or ``late_command``) needs no fresh command to be acknowledged:
+        the axis then waits (valve safe) until commands resume. The e-stop needs :meth:`reset`.
         """
         if axis not in self._latched:
             raise ValueError(f"axis: {axis!r} refused; allowed: one of {', '.join(AXES)}")
@@ -538,14 +574,16 @@ class SafetySupervisor:
             f"{key} ({msg})"
             for group in self._groups.values()
             for (a, key), (msg, _v) in group.items()
-            if a == axis and key not in ("watchdog", "stroke_limit:x", "angle_limit:encoder")
+            if a == axis
+            and key not in ("watchdog", "late_command", "stroke_limit:x", "angle_limit:encoder")
         ]
 
     def _clear_axis(self, axis: str) -> list[str]:
         wd = self._groups.get("watchdog", {})
-        if (axis, "watchdog") in wd:
-            del wd[(axis, "watchdog")]
-            self._s.cmd_have[_AXIS_INDEX[axis]] = 0  # wait for commands to resume
+        for key in ("watchdog", "late_command"):
+            if (axis, key) in wd:
+                del wd[(axis, key)]
+                self._s.cmd_have[_AXIS_INDEX[axis]] = 0  # wait for commands to resume
         cleared = list(self._latched[axis])
         self._latched[axis].clear()
         return cleared
@@ -591,6 +629,9 @@ class SafetySupervisor:
         return {
             "T_ns": th.T_ns,
             "watchdog_ns": th.watchdog_ns,
+            "late_policy": th.late_policy,
+            "late_hold_ns": th.late_hold_ns,
+            "late_ramp_ns": th.late_ramp_ns,
             "stuck_ns": th.stuck_ns,
             "stall_ns": th.stall_ns,
             "x_hi": th.x_hi,
@@ -649,7 +690,7 @@ class SafetySupervisor:
             axis, fault = key
             msg, values = present[key]
             if fault not in self._latched[axis]:
-                self.counters["trips"] += 1
+                self._counts["trips"] += 1
             self._latched[axis][fault] = msg
             self._emit(
                 axis,
@@ -683,7 +724,7 @@ class SafetySupervisor:
         now: int | None = None,
     ) -> None:
         if len(self._events) == self._events.maxlen:
-            self.counters["events_dropped"] += 1
+            self._counts["events_dropped"] += 1
         kv = tuple((k, _fmt(v)) for k, v in values.items())
         self._events.append(
             SafetyEvent(self._now_ns if now is None else now, axis, rule, level, message, kv)

@@ -174,8 +174,9 @@ class RigCycle:
         """Step the plant k -> k+1 under the held u_{k-1}; then hold the answers u_k.
 
         An axis without an answer keeps its previous command (the DAQ holds
-        its last output; the supervisor's watchdog decides when that is too
-        old) and is counted: ``timeouts`` in lockstep, ``missed`` in realtime.
+        its last output; the supervisor's late-command policy decides what is
+        written while it is late and its watchdog when it is gone, DESIGN §14)
+        and is counted: ``timeouts`` in lockstep, ``missed`` in realtime.
         """
         if self.sample is None:
             raise RuntimeError("RigCycle.advance before reset()")
@@ -247,9 +248,12 @@ class RigCycle:
         return NEUTRAL_V, NEUTRAL_V
 
     def counters(self) -> dict[str, int]:
-        """Flat counters for diagnostics: ``steps``, ``timeouts.linear``, ..."""
+        """Flat counters for diagnostics: ``steps``, ``timeouts.linear``, ..., then the
+        supervisor's (as the driver reports them: ``future_commands``, ``trips``, ...,
+        ``linear.late_ticks``, ``linear.held_ticks``, ``linear.ramped_ticks``, ...)."""
         out = {"steps": self.steps}
         for name in ("timeouts", "stale", "missed", "silenced"):
             for axis, n in getattr(self, name).items():
                 out[f"{name}.{axis}"] = n
+        out.update(getattr(self.supervisor, "counters", None) or {})
         return out
