@@ -192,3 +192,25 @@ def test_unsecured_the_same_rogue_moves_the_valve(tmp_path):
     assert "publisher created" in line
     x = _bag_x(out) if (out / "run.mcap").exists() else np.array([])
     assert len(x) != 2000 or not np.array_equal(x, _runner_x())
+
+
+@pytest.mark.parametrize("deployment", ["nodes", "hosted"])
+def test_a_secured_realtime_graph_is_recorded_by_rosbag2(tmp_path, keystore, deployment):
+    """Realtime runs are recorded by ``ros2 bag record`` in the recorder's enclave: its
+    permissions must cover what rosbag2 itself publishes (before: it exited at start and the
+    bag held no message)."""
+    out = tmp_path / "run"
+    proc = subprocess.run(
+        ["ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py", "mode:=realtime",
+         "axes:=both", "duration:=3", f"deployment:={deployment}", f"keystore:={keystore}",
+         f"out:={out}"],  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=_env(False),
+    )
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and "process has died" not in log, log[-3000:]
+    data = read_run(out / "bag")
+    for topic in ("/pneu/linear/joint_state", "/pneu/linear/valve_command"):
+        assert len(data[topic]) > 1000, (topic, log[-2000:])
