@@ -201,9 +201,19 @@ def test_a_secured_realtime_graph_is_recorded_by_rosbag2(tmp_path, keystore, dep
     bag held no message)."""
     out = tmp_path / "run"
     proc = subprocess.run(
-        ["ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py", "mode:=realtime",
-         "axes:=both", "duration:=3", f"deployment:={deployment}", f"keystore:={keystore}",
-         f"out:={out}"],  # fmt: skip
+        [
+            "ros2",
+            "launch",
+            "--noninteractive",
+            "pneu_sim",
+            "sim.launch.py",
+            "mode:=realtime",
+            "axes:=both",
+            "duration:=3",
+            f"deployment:={deployment}",
+            f"keystore:={keystore}",
+            f"out:={out}",
+        ],
         capture_output=True,
         text=True,
         timeout=600,
