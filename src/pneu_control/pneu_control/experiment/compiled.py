@@ -115,8 +115,8 @@ def run_compiled(
     p = packed
     t_wall = time.perf_counter()
     status, k_stop, last_event = closed_loop(
-        n, t_ns, st, prm, noise, out, p.axes, p.algs, p.sup_on, p.sp, p.si,
-        (*sup_new(p.si), np.empty(4)), rec,
+        n, t_ns, st, prm, noise, out, p.axes, p.algs, p.sup_on, p.scale,
+        (*sup_new(p.sf), np.empty(4)), rec,
     )  # fmt: skip
     wall = time.perf_counter() - t_wall
     if status != L.OK:

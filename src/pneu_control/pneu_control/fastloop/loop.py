@@ -38,10 +38,6 @@ from pneu_control.fastloop.layout import (
     REC_AXIS,
     REC_HELD,
     REC_SAMPLE,
-    SP_P_A,
-    SP_V_MID,
-    SP_V_PER_M,
-    SP_V_PER_PA,
 )
 from pneu_control.fastloop.supervisor import (
     SN_EVENT,
@@ -83,22 +79,21 @@ def _sample_finite(out):
 
 
 @njit(**JIT)
-def _supervise_sample(sp, si, sup_state, now, out):
+def _supervise_sample(scale, sup_state, now, out):
     """``RigCycle._begin``: the supervisor checks s_k with its raw volts, then gives the tick-k
     output. Returns (linear V, rotary V, whether the Python supervisor has an event)."""
     sf, sn, xw_t, xw_x, cw_t, cw_c, volts = sup_state
     p1, p2, pm, x = out[0], out[1], out[2], out[3]
-    vpp = sp[SP_V_PER_PA]
-    pa = sp[SP_P_A]
+    sc = scale[0]
+    vpp = sc.v_per_pa
+    pa = sc.p_a
     volts[0] = (p1 - pa) * vpp  # pneu_sim.faults.injection.SensorScaling.volts
     volts[1] = (p2 - pa) * vpp
     volts[2] = (pm - pa) * vpp
-    volts[3] = x * sp[SP_V_PER_M] + sp[SP_V_MID]
+    volts[3] = x * sc.v_per_m + sc.v_mid
     sn[SN_EVENT] = 0
-    sup_check_sample(
-        sp, si, sf, sn, xw_t, xw_x, cw_t, cw_c, now, p1, p2, pm, x, np.int64(out[6]), volts
-    )
-    hold_l, hold_r = sup_outputs(sp, si, sf, sn, now)
+    sup_check_sample(sf, sn, xw_t, xw_x, cw_t, cw_c, now, p1, p2, pm, x, np.int64(out[6]), volts)
+    hold_l, hold_r = sup_outputs(sf, sn, now)
     return hold_l, hold_r, sn[SN_EVENT] != 0
 
 
@@ -133,7 +128,7 @@ def _axis_answer(a, view, algs, t, out, rec, k, sup_on, sup_state, now):
 
 
 @njit(cache=True, nogil=True, **JIT)
-def closed_loop(n, T_ns, st, prm, noise, out, axes, algs, sup_on, sp, si, sup_state, rec):
+def closed_loop(n, T_ns, st, prm, noise, out, axes, algs, sup_on, scale, sup_state, rec):
     """Run n cycles from the plant state ``st`` whose sample s_0 is in ``out``.
 
     ``noise[k]``: the plant's noise row for step k (as :meth:`Plant.step` draws it).
@@ -141,8 +136,8 @@ def closed_loop(n, T_ns, st, prm, noise, out, axes, algs, sup_on, sp, si, sup_st
     linear, 1 rotary) whether it has a controller, its axis constants and state, step
     input, reference and knots, algorithm code and table (:mod:`.pack`); ``algs`` the
     constants and state records of every compiled algorithm, per axis. ``sup_state``: the
-    supervisor's fresh state (:func:`.supervisor.sup_new`) and 4 floats of scratch for
-    the raw volts. ``rec`` float64[n, N_REC]: one row per cycle (layout: ``REC_*`` in
+    supervisor's fresh state with the run's thresholds (:func:`.supervisor.sup_new`) and 4
+    floats of scratch for the raw volts, ``scale`` the sensor scaling (:data:`.layout.SCALE`). ``rec`` float64[n, N_REC]: one row per cycle (layout: ``REC_*`` in
     :mod:`.layout`; the axis columns are written only for active axes).
     Returns (status, k, last_event): status :data:`~.layout.OK` or why the loop stopped
     at cycle k; ``last_event`` the last cycle (n = the final check) at which the Python
@@ -162,7 +157,7 @@ def closed_loop(n, T_ns, st, prm, noise, out, axes, algs, sup_on, sp, si, sup_st
         if not _sample_finite(out):
             return NONFINITE_SAMPLE, k, last_event
         if sup_on:  # RigCycle._begin: check s_k, then the tick-k output
-            hold_l, hold_r, event = _supervise_sample(sp, si, sup_state, now, out)
+            hold_l, hold_r, event = _supervise_sample(scale, sup_state, now, out)
             if event:
                 last_event = k
         if k == n:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from pneu_driver.safety.rules import THRESHOLDS, fresh_array
 from pneu_msgs_py.contract.samples import AXES
 
 from pneu_control.algorithms import ALGORITHM_CLASSES
@@ -20,6 +21,7 @@ from pneu_control.algorithms.base import STEP_INPUT, KernelAlgorithm
 from pneu_control.controller.axis import AXIS_CONSTANTS, AXIS_STATE, AxisController
 from pneu_control.controller.references import REFERENCE
 from pneu_control.fastloop import layout as L
+from pneu_control.fastloop.supervisor import RECORD as SUP_RECORD
 
 __all__ = ["Packed", "pack_spec", "unsupported"]
 
@@ -31,8 +33,8 @@ class Packed:
     axes: tuple  # (active, ac, ast, inp, rc, knots, codes, tables, uses_theta), per axis
     algs: tuple  # (constants, state) record arrays of every compiled algorithm, per axis
     sup_on: bool
-    sp: np.ndarray  # float64[N_SP]
-    si: np.ndarray  # int64[N_SI]
+    sf: np.ndarray  # the supervisor's record (fastloop.supervisor.RECORD), thresholds in it
+    scale: np.ndarray  # the sensor scaling (layout.SCALE)
 
 
 def unsupported(spec: Any) -> str | None:
@@ -61,37 +63,23 @@ def _padded(tables: list[Any]) -> np.ndarray:
     return out
 
 
-def _supervisor(sup: Any, scaling: Any, sp: np.ndarray, si: np.ndarray) -> None:
-    th = sup.thresholds()
-    p = sup.params
-    sp[L.SP_X_HI], sp[L.SP_X_LO], sp[L.SP_X_ABS] = th["x_hi"], th["x_lo"], th["x_abs_max"]
-    pm = th["p_max"]
-    sp[L.SP_PMAX_C1], sp[L.SP_PMAX_C2], sp[L.SP_PMAX_M1] = pm["p_c1"], pm["p_c2"], pm["p_m1"]
-    live = th["live_v"]
+def _supervisor(sup: Any, scaling: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The supervisor's record with the run's thresholds (copied by name from the record the
+    Python supervisor's rules read) and the sensor scaling of the raw volts."""
+    sf = fresh_array(SUP_RECORD)
+    scale = L.SCALE.array(1)
+    if sup is None:
+        sf[0]["n_xw"] = sf[0]["n_cw"] = 1  # unused windows, never empty arrays
+        return sf, scale
+    live = sup.thresholds()["live_v"]
     if not (live["p_c1"] == live["p_c2"] == live["p_m1"]):
         raise ValueError("the compiled supervisor assumes one live range for the pressure sensors")
-    sp[L.SP_PLO], sp[L.SP_PHI] = live["p_c1"]
-    sp[L.SP_LLO], sp[L.SP_LHI] = live["x"]
-    sp[L.SP_TOWARD] = th["u_toward_hi"]
-    sp[L.SP_DECEL] = p.max_decel_m_s2
-    sp[L.SP_HYST] = p.stroke_hyst_m
-    sp[L.SP_MAX_RPM] = p.max_speed_rpm
-    sp[L.SP_ACCEL] = p.max_accel_rad_s2
-    sp[L.SP_STALL_PA] = p.stall_inlet_pa
-    r = sup.threshold_record  # the rest straight from the record the rules read
-    sp[L.SP_STALL_BAND], sp[L.SP_STALL_OMEGA] = r.stall_band_v, r.stall_omega
-    sp[L.SP_RAD_PER_COUNT], sp[L.SP_TH_HI], sp[L.SP_TH_LO] = r.rad_per_count, r.th_hi, r.th_lo
-    sp[L.SP_AHYST], sp[L.SP_ADECEL] = r.angle_hyst, r.max_decel_rad_s2
-    sp[L.SP_ROT_IDLE], sp[L.SP_ALAG] = r.rot_idle_v, r.angle_lag_s
-    sp[L.SP_V_PER_PA], sp[L.SP_P_A] = scaling.v_per_pa, scaling.p_a
-    sp[L.SP_V_PER_M], sp[L.SP_V_MID] = scaling.v_per_m, scaling.v_mid
-    si[L.SI_T_NS], si[L.SI_WD_NS] = th["T_ns"], th["watchdog_ns"]
-    si[L.SI_STUCK_NS], si[L.SI_STALL_NS] = th["stuck_ns"], th["stall_ns"]
-    si[L.SI_NXW], si[L.SI_NCW] = th["velocity_window"], th["speed_window"]
-    si[L.SI_CPR], si[L.SI_SLACK] = p.counts_per_rev, p.encoder_slack_counts
-    si[L.SI_REVERSE] = r.stall_reverse
-    si[L.SI_LATE_POLICY], si[L.SI_LATE_HOLD_NS] = th["late_policy"], th["late_hold_ns"]
-    si[L.SI_LATE_RAMP_NS] = th["late_ramp_ns"]
+    th = sup.threshold_record
+    for name, *_ in THRESHOLDS.defaults:
+        sf[0][name] = getattr(th, name)
+    for name, *_ in L.SCALE.defaults:
+        scale[0][name] = getattr(scaling, name)
+    return sf, scale
 
 
 def pack_spec(spec: Any, sup: Any | None, scaling: Any | None) -> Packed:
@@ -125,11 +113,6 @@ def pack_spec(spec: Any, sup: Any | None, scaling: Any | None) -> Packed:
         alg.c.store(algs[2 * codes[a]][a])
         alg.st.store(algs[2 * codes[a] + 1][a])
         tables[a] = alg.tab
-    sp = np.zeros(L.N_SP)
-    si = np.zeros(L.N_SI, dtype=np.int64)
-    if sup is not None:
-        _supervisor(sup, scaling, sp, si)
-    else:
-        si[L.SI_NXW] = si[L.SI_NCW] = 1  # unused windows, never empty arrays
+    sf, scale = _supervisor(sup, scaling)
     axes = (active, ac, ast, inp, rc, _padded(knots), codes, _padded(tables), uses_theta)
-    return Packed(axes, tuple(algs), sup is not None, sp, si)
+    return Packed(axes, tuple(algs), sup is not None, sf, scale)
