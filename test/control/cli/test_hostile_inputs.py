@@ -638,12 +638,12 @@ TASK_HEAD = "plumbing: bidirectional\nsegments:\n"
     "segment, field, allowed",
     [
         ("  - move: {to_mm: 10, duration_s: 1e-300}", "segments[0].move.duration_s",
-         "[0.001, inf) s: at least one control sample"),
+         "[0.001, 599.8] s: at least one control sample"),
         ("  - spin: {speed_rpm: 60, duration_s: 1e-300}", "segments[0].spin.duration_s",
          "at least one control sample"),
-        ("  - dwell: {duration_s: 1e-300}", "segments[0].dwell.duration_s", "[0.001, inf) s"),
+        ("  - dwell: {duration_s: 1e-300}", "segments[0].dwell.duration_s", "[0.001, 599.8] s"),
         ("  - move: {to_mm: 10, speed_mm_s: 1e9}", "segments[0].move.speed_mm_s",
-         "(0, 20000] mm/s"),
+         "[0.0333444, 20000] mm/s"),
         ("  - screw: {pitch_mm: 1, turns: 1e-300, rate_turns_s: 1}", "segments[0].screw.turns",
          "ramp_s <= |turns|/rate_turns_s"),
         ("  - dwell: {duration_s: 0.1}\n    load: {bogus: 1}", "segments[0].load.bogus",
@@ -662,6 +662,65 @@ def test_a_task_segment_is_checked_whole_before_anything_is_written(
     task.write_text(TASK_HEAD + segment + "\n")
     refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
     assert not (tmp_path / "o").exists()
+
+
+# the third round: a task no run could carry (internal errors, a 23 GB trajectory), ranges
+# said whole, and fields that would be silently unused
+@pytest.mark.parametrize(
+    "segment, field, allowed",
+    [
+        # 2·10 mm / 1e-300 mm/s: a 2e301 s motion (OverflowError: an internal error before)
+        ("  - move: {to_mm: 10, speed_mm_s: 1e-300}", "segments[0].move.speed_mm_s",
+         "[0.0333444, 20000] mm/s: the motion over at least one control sample (1 ms) and "
+         "at most 599.8 s"),
+        ("  - spin: {speed_rpm: 60, duration_s: 1e300}", "segments[0].spin.duration_s",
+         "[0.001, 599.8] s"),  # OverflowError before
+        # a 5e7 s helix: its trajectory filled 23 GB before the sum of timeouts was checked
+        ("  - screw: {pitch_mm: 1e-9, turns: 1e9, rate_turns_s: 20}", "segments[0].screw.turns",
+         "at most 14988.7 turns either way (at 25 turns/s, max_speed_rpm, within 599.8 s"),
+        ("  - screw: {pitch_mm: 1, turns: 20, rate_turns_s: 0.01}",
+         "segments[0].screw.rate_turns_s", "[0.0333584, 25] turns/s"),
+        ("  - rotate: {turns: 1e6, speed_rpm: 600}", "segments[0].rotate",
+         "a motion of at most 2.6991e+06° (at 1500 rpm, the supervisor's top speed"),
+        ("  - rotate: {turns: 10, speed_rpm: 1e-3}", "segments[0].rotate.speed_rpm",
+         "[2.00067, 1500] rpm"),
+        ("  - dwell: {duration_s: 0.1}\n    timeout_s: 0", "segments[0].timeout_s",
+         "[0.1, 599.8] s (at least the motion it bounds"),
+        ("  - dwell: {duration_s: 0.1}\n    timeout_s: -1", "segments[0].timeout_s", "[0.1, 599.8]"),
+        ("  - dwell: {duration_s: 0.1}\n    timeout_s: .inf", "segments[0].timeout_s",
+         "[0.1, 599.8]"),  # was refused with "(0, inf) s", which reads as if inf were in
+        ("  - wait: {}\n    until: {force: {above_n: 10}}\n    timeout_s: 1e300",
+         "segments[0].timeout_s", "(0, 599.8] s"),
+        ("  - dwell: {duration_s: 0.001}\n" * 300, "segments",
+         "at most 599.8 s in all (the duration cap of a run, 600 s, less the 0.2 s safe tail)"),
+        ("  - move: {to_mm: 10, speed_mm_s: 40}\n    until: {settled: {tol_mm: 1e300}}",
+         "segments[0].until.settled.tol_mm", "(0, 150) mm (narrower than the stroke)"),
+        ("  - rotate: {by_deg: 90, speed_rpm: 60}\n    until: {settled: {tol_deg: 720}}",
+         "segments[0].until.settled.tol_deg", "(0, 360) ° (narrower than a turn)"),
+        ("  - wait: {duration_s: 1}\n    until: {force: {above_n: 10}}",
+         "segments[0].wait.duration_s", "no fields here"),  # "one of " and nothing before
+    ],
+)  # fmt: skip
+def test_a_task_no_run_could_carry_is_refused_first(tmp_path, segment, field, allowed):
+    task = tmp_path / "task.yaml"
+    task.write_text(TASK_HEAD + segment + "\n")
+    refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "head, field, allowed",
+    [
+        ("controllers: {linear: {reference.kind: sine}}\n", "controllers.linear.reference.kind",
+         "other than reference.* (the task's segments are the references)"),  # unused before
+        ("controllers: {third: {}}\n", "controllers.third: an empty mapping {}",
+         "linear or rotary"),  # "a mapping (0 keys: )" before
+    ],
+)  # fmt: skip
+def test_task_controllers_refuse_what_a_task_never_reads(tmp_path, head, field, allowed):
+    task = tmp_path / "task.yaml"
+    task.write_text(head + TASK_HEAD + "  - dwell: {duration_s: 0.1}\n")
+    refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
 
 
 if __name__ == "__main__":
