@@ -723,5 +723,37 @@ def test_task_controllers_refuse_what_a_task_never_reads(tmp_path, head, field, 
     refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
 
 
+# ------------------------------------------------------------ the parser itself
+@pytest.mark.parametrize(
+    "argv, allowed",
+    [
+        (["recover", "a.mcap", "b.mcap"], "unrecognized arguments: b.mcap"),
+        ([*RUN, "\u2014duration", "1"], "unrecognized arguments: \u2014duration 1; did you mean "
+         "--duration?"),  # a dash a word processor made typographic
+        ([*RUN, "--durations", "1"], "did you mean --duration?"),
+    ],
+)  # fmt: skip
+def test_an_unknown_argument_is_refused_by_its_subcommand(tmp_path, argv, allowed):
+    """argparse's own line was ``pneu: error: unrecognized arguments`` whatever the
+    subcommand; now the subcommand's, with the option the token resembles."""
+    line = refused(*argv, "--out", tmp_path / "o", field="unrecognized", allowed=allowed)
+    assert line.endswith(f"(see pneu {argv[0]} --help)")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_closed_stdout_pipe_keeps_the_exit_code(tmp_path):
+    """``pneu run ... | head -0``: the reader gone, the run still finishes its files and exits
+    with its own code (3: the supervisor acted), not 0 (a BrokenPipeError took the code)."""
+    out = tmp_path / "o"
+    proc = subprocess.Popen([*P.PNEU, *RUN[:-1], "0.3", "--fault",
+                             "controller_nan:start_s=0.02,duration_s=0.1", "--out", out],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    proc.stdout.close()  # before anything was printed
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=300) == 3, err
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert json.loads((out / "metrics.json").read_text())["safety_stopped"], err
+
+
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-q"]))
