@@ -322,23 +322,58 @@ def test_paper_interrupted_in_its_uncertainty_stage_says_so(tmp_path):
     assert not (out / "uncertainty").exists()
 
 
-def test_a_full_disk_mid_run_is_one_line_and_leaves_no_partial(tmp_path):
-    """A write that fails (here a file-size limit, as a full disk fails it) ends the run
-    with one line, exit 1, and no half-written file."""
+@pytest.fixture(scope="module")
+def excitation(tmp_path_factory) -> Path:
+    """A linear-only quick excitation (pneu excite's bag directory)."""
+    out = tmp_path_factory.mktemp("exl") / "exl"
+    rc, _, err = pneu("excite", "--axis", "linear", "--level", "quick", "--out", out)
+    assert rc == 0, err
+    return out
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["run", "--axis", "linear", "--controller", "pid", "--duration", "20"],
+        ["validate", "{exl}"],  # its first figure was left as validate_00_..._linear.png.partial
+        ["task", str(config_file("tasks/screw_in.yaml"))],
+    ],
+)
+def test_a_full_disk_mid_run_is_one_line_and_leaves_no_partial(tmp_path, argv, request):
+    """A write that fails (here a file-size limit, as a full disk fails it) ends the command
+    with one line saying so, exit 1, and no half-written file."""
     import resource
 
     def limit() -> None:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # the write fails (EFBIG), no kill
-        resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+        resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
 
+    if "{exl}" in argv:
+        argv = [str(request.getfixturevalue("excitation")) if a == "{exl}" else a for a in argv]
     out = tmp_path / "o"
-    proc = subprocess.run([*P.PNEU, "run", "--axis", "linear", "--controller", "pid",
-                           "--duration", "20", "--out", out], capture_output=True, text=True,
+    proc = subprocess.run([*P.PNEU, *argv, "--out", out], capture_output=True, text=True,
                           preexec_fn=limit, timeout=600)  # fmt: skip
     lines = [ln for ln in proc.stderr.splitlines() if "error" in ln]
     assert proc.returncode == 1 and len(lines) == 1, proc.stderr
+    assert "a full disk or a file-size limit" in lines[0], lines
     assert "Traceback" not in proc.stderr and "internal error" not in proc.stderr
     assert not out.exists() or not [p for p in out.iterdir() if p.name.endswith(".partial")]
+
+
+@pytest.mark.parametrize(
+    "argv, name",
+    [
+        ([*RUN, "--out"], "{long}"),  # rc 1 'File name too long' before: a stat, not a check
+        (["recover", "{bag}", "--out"], "{long}.mcap"),
+        (["plot", "{bag}", "--out"], "{long}.png"),
+        (["identify", "{bag}", "--out"], "{long}.yaml"),
+    ],
+)
+def test_an_output_name_too_long_is_refused_first(tmp_path, short_bag, argv, name):
+    argv = [str(short_bag) if a == "{bag}" else a for a in argv]
+    out = tmp_path / name.replace("{long}", "n" * 300)
+    refused(*argv, out, field="--out", allowed="names of at most 255 bytes")
+    assert list(tmp_path.iterdir()) == []
 
 
 # ------------------------------------------------- refused option combinations

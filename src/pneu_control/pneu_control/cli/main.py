@@ -11,6 +11,7 @@ signal N (SIGHUP 129, SIGINT 130, SIGTERM 143).
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
 import re
@@ -299,7 +300,9 @@ def _classify(err: Exception) -> tuple[int, str]:
         return exits.BAD_INPUT, str(err)
     if isinstance(err, OSError):
         where = f"{err.filename}: " if err.filename else ""
-        return exits.RUNTIME_ERROR, f"{where}{err.strerror or err}"
+        full = err.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)
+        why = " (writing the outputs: a full disk or a file-size limit)" if full else ""
+        return exits.RUNTIME_ERROR, f"{where}{err.strerror or err}{why}"
     if isinstance(err, MemoryError):
         return exits.RUNTIME_ERROR, "out of memory"
     return (
