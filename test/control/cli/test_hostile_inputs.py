@@ -251,6 +251,32 @@ def test_validate_refuses_a_bag_with_nothing_to_compare(tmp_path):
     assert "--horizon" in line and not (tmp_path / "v").exists()
 
 
+def test_validate_on_a_run_bag_says_why_for_each_axis(tmp_path):
+    """The issue's ``pneu validate BAG_DIR/lin``: a run whose supervisor warned at 0.49 s has
+    valid stretches of 0.2 s only; the refusal named just the rotary axis (not in the bag)
+    and not why the linear one had nothing at the judged horizon."""
+    run = tmp_path / "lin"
+    rc, _, err = pneu("run", "--duration", "2", "--out", run)  # pneu run's defaults
+    assert rc in (0, 3), err
+    line = refused("validate", run, "--out", tmp_path / "v", field="BAG",
+                   allowed="linear: no valid stretch of 1 s (supervisor event at sample")  # fmt: skip
+    assert "it has 0.2 s" in line and "try --horizon" in line and "rotary: not in this bag" in line
+    assert not (tmp_path / "v").exists()
+    rc, out, err = pneu("validate", run, "--horizon", "0.2")  # as the line suggests
+    assert rc == 0 and "0.2 s (judged)" in out, err
+
+
+def test_validate_refuses_overwrite_without_out_and_a_foreign_report(tmp_path, short_bag):
+    refused("validate", short_bag, "--overwrite", field="--overwrite", allowed="only with --out")
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(config_file("plant.yaml").read_text())
+    for text in ('{"bags": 5}', "[1]", "{nope"):  # Python's own words before ('int' object ...)
+        (tmp_path / "plant.identify.json").write_text(text)
+        line = refused("validate", short_bag, "--plant", plant, field="--plant",
+                       allowed="a report of pneu identify beside the plant file (")  # fmt: skip
+        assert "is not iterable" not in line and "has no attribute" not in line, line
+
+
 # ------------------------------------------------------------------------ Dask
 def _dead_port() -> int:
     with socket.socket() as s:
