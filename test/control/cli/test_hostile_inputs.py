@@ -357,6 +357,26 @@ def excitation(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.parametrize("axis", ["rotary", "both"])
+def test_identify_refuses_an_axis_the_bags_do_not_excite_in_one_line(tmp_path, excitation, axis):
+    """``--axis rotary`` on a linear excitation: 'read ...' and 'rotary: fitting 11 parameters
+    to 0 bag(s)' were printed before the error (or, with both, the linear fit ran first)."""
+    refused("identify", excitation, "--axis", axis, "--out", tmp_path / "p.yaml",
+            field="--axis", allowed="an axis the bags excite (linear)")  # fmt: skip
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_identify_refuses_bags_that_excite_nothing(tmp_path):
+    held = tmp_path / "held.mcap"  # the rig holding the valve at 5 V: nothing excited
+    rc, _, err = pneu("rig", "--backend", "sim", "--duration", "0.3", "--hold", "linear=5",
+                      "--out", tmp_path / "r")  # fmt: skip
+    assert rc in (0, 3), err
+    (tmp_path / "r" / "run.mcap").rename(held)
+    refused("identify", held, "--out", tmp_path / "p.yaml", field="BAG",
+            allowed="bags that excite an axis")  # fmt: skip
+    assert not (tmp_path / "p.yaml").exists()
+
+
 @pytest.mark.parametrize(
     "argv",
     [
