@@ -804,6 +804,24 @@ def test_task_controllers_refuse_what_a_task_never_reads(tmp_path, head, field, 
     refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
 
 
+# --------------------------------------------------------------- pneu bench angle
+@pytest.mark.parametrize(
+    "extra, field, allowed",
+    [
+        (["--only", "plant"], "--only: 'plant'", "not with 'pneu bench angle'"),  # was 'True'
+        (["--seed", str(2**32 - 1)], "--seed: 4294967295",  # was '--seed + --samples'
+         "[0, 4294967255] (with --samples 40"),
+        (["--safety", "/dev/zero"], "--safety: /dev/zero", "not a regular file"),  # unnamed
+        (["--samples", "0"], "--samples", "[1, 1000]"),
+        (["--serial", "--workers", "2"], "--workers", "not with --serial"),
+        (["--overwrite"], "--overwrite", "only with --out"),
+    ],
+)  # fmt: skip
+def test_bench_angle_options_are_refused_naming_the_option(tmp_path, extra, field, allowed):
+    refused("bench", "angle", *extra, field=field, allowed=allowed)
+    assert list(tmp_path.iterdir()) == []
+
+
 # ------------------------------------------------------------ the parser itself
 @pytest.mark.parametrize(
     "argv, allowed",
