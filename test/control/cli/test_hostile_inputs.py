@@ -159,6 +159,19 @@ def test_live_view_options_only_with_live(tmp_path, option, value):
     assert not (tmp_path / "o").exists()
 
 
+def test_a_live_view_that_cannot_start_names_its_option(tmp_path):
+    pytest.importorskip("foxglove")
+    refused(*RUN, "--out", tmp_path / "o", "--live", "0", "--live-host", "nohost.invalid",
+            field="--live-host: 'nohost.invalid'", allowed="a name or address of this machine")  # fmt: skip
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        refused("sim", "--duration", "0.05", "--no-plot", "--out", tmp_path / "o", "--live",
+                str(port), field=f"--live: {port}", allowed="--live 0 picks a free port")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
 def test_an_error_about_a_wrong_file_is_one_short_line(tmp_path):
     line = refused("sim", "--duration", "0.05", "--out", tmp_path / "o", "--no-plot",
                    "--plant", config_file("controllers.yaml"), field="--plant")  # fmt: skip
