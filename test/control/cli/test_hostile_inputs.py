@@ -835,6 +835,52 @@ def test_bench_angle_options_are_refused_naming_the_option(tmp_path, extra, fiel
     assert list(tmp_path.iterdir()) == []
 
 
+# ------------------------------------------------------------------ pneu security
+@pytest.mark.parametrize(
+    "domain, argv, field, allowed",
+    [
+        ("\u0663", [], "ROS_DOMAIN_ID", "0-232 in digits 0-9"),  # an Arabic-Indic 3: Python's int
+        (None, [], "ROS_DOMAIN_ID: '(unset)'", "0-232"),
+        ("233", [], "ROS_DOMAIN_ID", "0-232"),
+        ("5", ["--operator", "a" * 50], "--operator: 'aaaaaaaaaaaa... (50 characters)'",
+         "at most 49 characters (the enclave's certificate name"),  # sros2 failed at the end
+        ("5", ["--operator", "bad name"], "--operator", "letters, digits and _"),
+        ("5", ["--operator", "bob", "--operator", "bob"], "--operator", "each name once"),
+    ],
+)  # fmt: skip
+def test_security_refuses_domains_and_operators_first(tmp_path, monkeypatch, domain, argv,
+                                                      field, allowed):  # fmt: skip
+    if domain is None:
+        monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)
+    else:
+        monkeypatch.setenv("ROS_DOMAIN_ID", domain)
+    refused("security", tmp_path / "ks", *argv, field=field, allowed=allowed)
+    assert not (tmp_path / "ks").exists()
+
+
+def test_security_checks_the_keystore_location_first(tmp_path, monkeypatch):
+    """Under a file or on a full or read-only location the keystore was found unwritable by
+    sros2, after the checks (exit 1, a part of it made)."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", "5")
+    (tmp_path / "f").write_text("")
+    refused("security", tmp_path / "f" / "ks", field="KEYSTORE",
+            allowed="a location under a directory")  # fmt: skip
+    refused("security", tmp_path / "f", field="KEYSTORE", allowed="a directory")
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "keep.txt").write_text("mine")
+    refused("security", tmp_path / "d", field="KEYSTORE", allowed="a keystore this command made")
+    real = os.statvfs
+
+    class Ro:
+        def __init__(self, path):
+            st = real(path)
+            self.f_frsize, self.f_bavail, self.f_flag = st.f_frsize, st.f_bavail, os.ST_RDONLY
+
+    monkeypatch.setattr(os, "statvfs", Ro)
+    refused("security", tmp_path / "ks", field="KEYSTORE", allowed="read-only file system")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d", "f"]
+
+
 # ------------------------------------------------------------ the parser itself
 @pytest.mark.parametrize(
     "argv, allowed",

@@ -38,7 +38,15 @@ from pathlib import Path
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.inputs import is_input
 
-__all__ = ["LOCK_NAME", "MIN_FREE_BYTES", "PARTIAL", "OutputDir", "OutputFile", "is_same_path"]
+__all__ = [
+    "LOCK_NAME",
+    "MIN_FREE_BYTES",
+    "PARTIAL",
+    "OutputDir",
+    "OutputFile",
+    "check_writable_dir",
+    "is_same_path",
+]
 
 LOCK_NAME = ".pneu.lock"
 PARTIAL = ".partial"
@@ -103,6 +111,15 @@ def _check_location(p: Path, field: str, shown: str, longest: str = "") -> None:
             f"a location with free space (at least {MIN_FREE_BYTES // 2**20} MiB; "
             f"{free} bytes free on {q}'s file system)",
         )
+
+
+def check_writable_dir(path: str | os.PathLike, field: str) -> None:
+    """A directory another tool fills (``pneu security``'s keystore): rule 5 before anything is
+    created (not empty, names that fit, under a directory, writable, not full)."""
+    p = Path(path)
+    _check_text(p, field)
+    _check_fits(p, field, str(p))
+    _check_location(p, field, str(p))
 
 
 def _check_replaceable(f: Path, field: str, shown: str) -> None:
