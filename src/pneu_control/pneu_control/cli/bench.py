@@ -201,18 +201,11 @@ _ANGLE_ONLY = (
 )  # fmt: skip
 
 
-def run_angle(args: argparse.Namespace) -> int:
-    """``pneu bench angle``: plan, run and print the angle benchmark (JSON with ``--json``),
-    ``--out DIR``: also its files; the exit code."""
-    from pneu_msgs_py.lifecycle import signals
-    from pneu_msgs_py.lifecycle.outputs import OutputDir
+def _angle_options(args: argparse.Namespace) -> tuple[int, int]:
+    """(samples, seed) of ``pneu bench angle``, every option checked."""
     from pneu_msgs_py.params.core import ParamError
-    from pneu_msgs_py.params.yaml_file import from_option
 
-    from pneu_control.bench import angle
-    from pneu_control.cli.progress import progress_bar, progress_to
     from pneu_control.experiment.session import SEED_MAX, check_seed
-    from pneu_control.sweep.executors import default_workers
 
     if args.only:
         raise ParamError(
@@ -236,6 +229,22 @@ def run_angle(args: argparse.Namespace) -> int:
         raise ParamError("--workers", args.workers, "an integer in [1, 1024]")
     if args.serial and args.workers is not None:
         raise ParamError("--workers", args.workers, "not with --serial (one process)")
+    return samples, seed
+
+
+def run_angle(args: argparse.Namespace) -> int:
+    """``pneu bench angle``: plan, run and print the angle benchmark (JSON with ``--json``),
+    ``--out DIR``: also its files; the exit code."""
+    from pneu_msgs_py.lifecycle import signals
+    from pneu_msgs_py.lifecycle.outputs import OutputDir
+    from pneu_msgs_py.params.core import ParamError
+    from pneu_msgs_py.params.yaml_file import from_option
+
+    from pneu_control.bench import angle
+    from pneu_control.cli.progress import progress_bar, progress_to
+    from pneu_control.sweep.executors import default_workers
+
+    samples, seed = _angle_options(args)
     claim = None
     if args.out is not None:
         claim = OutputDir(
