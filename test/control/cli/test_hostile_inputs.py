@@ -881,6 +881,26 @@ def test_security_checks_the_keystore_location_first(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d", "f"]
 
 
+# --------------------------------------------- found by the longer property run
+def test_sweep_names_its_plant_file(tmp_path, short_bag):
+    """A bag given as --plant: 'pneu sweep: error: PATH: not UTF-8 text' named no option."""
+    refused("sweep", "--samples", "1", "--experiment", "smooth_step_eq38", "--plant",
+            short_bag, "--out", tmp_path / "o", field="--plant", allowed="not UTF-8 text")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_refused_table_is_shown_by_its_size(tmp_path):
+    """An unknown key holding a 17-value table (a copied valve_du_table): the line showed
+    every value and ran to 359 characters."""
+    text = config_file("controllers.yaml").read_text()
+    table = "[" + ", ".join(f"{0.3 * i:.2f}" for i in range(17)) + "]"
+    bad = tmp_path / "controllers.yaml"
+    bad.write_text(text.replace("    pid:\n", f"    valve_du_table_x: {table}\n    pid:\n", 1))
+    refused(*RUN, "--out", tmp_path / "o", "--controllers", bad, field="valve_du_table_x",
+            allowed="no such parameter")  # fmt: skip
+    assert "a list of 17 items" in pneu(*RUN, "--out", tmp_path / "o", "--controllers", bad)[2]
+
+
 # ------------------------------------------------------------ the parser itself
 @pytest.mark.parametrize(
     "argv, allowed",

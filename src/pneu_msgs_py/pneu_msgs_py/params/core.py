@@ -64,8 +64,8 @@ def shown(value: Any) -> str:
     elif isinstance(value, Mapping):
         keys = ", ".join(str(k) for k in list(value)[:4]) + (", ..." if len(value) > 4 else "")
         text = f"a mapping ({len(value)} key{'s' * (len(value) != 1)}: {keys})"
-    elif isinstance(value, (list, tuple)) and len(repr(value)) > SHOWN_CHARS:
-        text = f"a list of {len(value)} items"
+    elif isinstance(value, (list, tuple)) and (len(value) > 6 or len(repr(value)) > SHOWN_CHARS):
+        text = f"a list of {len(value)} items"  # a table's values: its size says enough
     else:
         text = repr(value)
     if len(text) > SHOWN_CHARS:
