@@ -159,6 +159,19 @@ def test_live_view_options_only_with_live(tmp_path, option, value):
     assert not (tmp_path / "o").exists()
 
 
+def test_a_live_view_that_cannot_start_names_its_option(tmp_path):
+    pytest.importorskip("foxglove")
+    refused(*RUN, "--out", tmp_path / "o", "--live", "0", "--live-host", "nohost.invalid",
+            field="--live-host: 'nohost.invalid'", allowed="a name or address of this machine")  # fmt: skip
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        refused("sim", "--duration", "0.05", "--no-plot", "--out", tmp_path / "o", "--live",
+                str(port), field=f"--live: {port}", allowed="--live 0 picks a free port")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
 def test_an_error_about_a_wrong_file_is_one_short_line(tmp_path):
     line = refused("sim", "--duration", "0.05", "--out", tmp_path / "o", "--no-plot",
                    "--plant", config_file("controllers.yaml"), field="--plant")  # fmt: skip
@@ -251,6 +264,32 @@ def test_validate_refuses_a_bag_with_nothing_to_compare(tmp_path):
     assert "--horizon" in line and not (tmp_path / "v").exists()
 
 
+def test_validate_on_a_run_bag_says_why_for_each_axis(tmp_path):
+    """The issue's ``pneu validate BAG_DIR/lin``: a run whose supervisor warned at 0.49 s has
+    valid stretches of 0.2 s only; the refusal named just the rotary axis (not in the bag)
+    and not why the linear one had nothing at the judged horizon."""
+    run = tmp_path / "lin"
+    rc, _, err = pneu("run", "--duration", "2", "--out", run)  # pneu run's defaults
+    assert rc in (0, 3), err
+    line = refused("validate", run, "--out", tmp_path / "v", field="BAG",
+                   allowed="linear: no valid stretch of 1 s (supervisor event at sample")  # fmt: skip
+    assert "it has 0.2 s" in line and "try --horizon" in line and "rotary: not in this bag" in line
+    assert not (tmp_path / "v").exists()
+    rc, out, err = pneu("validate", run, "--horizon", "0.2")  # as the line suggests
+    assert rc == 0 and "0.2 s (judged)" in out, err
+
+
+def test_validate_refuses_overwrite_without_out_and_a_foreign_report(tmp_path, short_bag):
+    refused("validate", short_bag, "--overwrite", field="--overwrite", allowed="only with --out")
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(config_file("plant.yaml").read_text())
+    for text in ('{"bags": 5}', "[1]", "{nope"):  # Python's own words before ('int' object ...)
+        (tmp_path / "plant.identify.json").write_text(text)
+        line = refused("validate", short_bag, "--plant", plant, field="--plant",
+                       allowed="a report of pneu identify beside the plant file (")  # fmt: skip
+        assert "is not iterable" not in line and "has no attribute" not in line, line
+
+
 # ------------------------------------------------------------------------ Dask
 def _dead_port() -> int:
     with socket.socket() as s:
@@ -322,23 +361,78 @@ def test_paper_interrupted_in_its_uncertainty_stage_says_so(tmp_path):
     assert not (out / "uncertainty").exists()
 
 
-def test_a_full_disk_mid_run_is_one_line_and_leaves_no_partial(tmp_path):
-    """A write that fails (here a file-size limit, as a full disk fails it) ends the run
-    with one line, exit 1, and no half-written file."""
+@pytest.fixture(scope="module")
+def excitation(tmp_path_factory) -> Path:
+    """A linear-only quick excitation (pneu excite's bag directory)."""
+    out = tmp_path_factory.mktemp("exl") / "exl"
+    rc, _, err = pneu("excite", "--axis", "linear", "--level", "quick", "--out", out)
+    assert rc == 0, err
+    return out
+
+
+@pytest.mark.parametrize("axis", ["rotary", "both"])
+def test_identify_refuses_an_axis_the_bags_do_not_excite_in_one_line(tmp_path, excitation, axis):
+    """``--axis rotary`` on a linear excitation: 'read ...' and 'rotary: fitting 11 parameters
+    to 0 bag(s)' were printed before the error (or, with both, the linear fit ran first)."""
+    refused("identify", excitation, "--axis", axis, "--out", tmp_path / "p.yaml",
+            field="--axis", allowed="an axis the bags excite (linear)")  # fmt: skip
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_identify_refuses_bags_that_excite_nothing(tmp_path):
+    held = tmp_path / "held.mcap"  # the rig holding the valve at 5 V: nothing excited
+    rc, _, err = pneu("rig", "--backend", "sim", "--duration", "0.3", "--hold", "linear=5",
+                      "--out", tmp_path / "r")  # fmt: skip
+    assert rc in (0, 3), err
+    (tmp_path / "r" / "run.mcap").rename(held)
+    refused("identify", held, "--out", tmp_path / "p.yaml", field="BAG",
+            allowed="bags that excite an axis")  # fmt: skip
+    assert not (tmp_path / "p.yaml").exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["run", "--axis", "linear", "--controller", "pid", "--duration", "20"],
+        ["validate", "{exl}"],  # its first figure was left as validate_00_..._linear.png.partial
+        ["task", str(config_file("tasks/screw_in.yaml"))],
+    ],
+)
+def test_a_full_disk_mid_run_is_one_line_and_leaves_no_partial(tmp_path, argv, request):
+    """A write that fails (here a file-size limit, as a full disk fails it) ends the command
+    with one line saying so, exit 1, and no half-written file."""
     import resource
 
     def limit() -> None:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # the write fails (EFBIG), no kill
-        resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))
+        resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
 
+    if "{exl}" in argv:
+        argv = [str(request.getfixturevalue("excitation")) if a == "{exl}" else a for a in argv]
     out = tmp_path / "o"
-    proc = subprocess.run([*P.PNEU, "run", "--axis", "linear", "--controller", "pid",
-                           "--duration", "20", "--out", out], capture_output=True, text=True,
+    proc = subprocess.run([*P.PNEU, *argv, "--out", out], capture_output=True, text=True,
                           preexec_fn=limit, timeout=600)  # fmt: skip
     lines = [ln for ln in proc.stderr.splitlines() if "error" in ln]
     assert proc.returncode == 1 and len(lines) == 1, proc.stderr
+    assert "a full disk or a file-size limit" in lines[0], lines
     assert "Traceback" not in proc.stderr and "internal error" not in proc.stderr
     assert not out.exists() or not [p for p in out.iterdir() if p.name.endswith(".partial")]
+
+
+@pytest.mark.parametrize(
+    "argv, name",
+    [
+        ([*RUN, "--out"], "{long}"),  # rc 1 'File name too long' before: a stat, not a check
+        (["recover", "{bag}", "--out"], "{long}.mcap"),
+        (["plot", "{bag}", "--out"], "{long}.png"),
+        (["identify", "{bag}", "--out"], "{long}.yaml"),
+    ],
+)
+def test_an_output_name_too_long_is_refused_first(tmp_path, short_bag, argv, name):
+    argv = [str(short_bag) if a == "{bag}" else a for a in argv]
+    out = tmp_path / name.replace("{long}", "n" * 300)
+    refused(*argv, out, field="--out", allowed="names of at most 255 bytes")
+    assert list(tmp_path.iterdir()) == []
 
 
 # ------------------------------------------------- refused option combinations
@@ -638,12 +732,12 @@ TASK_HEAD = "plumbing: bidirectional\nsegments:\n"
     "segment, field, allowed",
     [
         ("  - move: {to_mm: 10, duration_s: 1e-300}", "segments[0].move.duration_s",
-         "[0.001, inf) s: at least one control sample"),
+         "[0.001, 599.8] s: at least one control sample"),
         ("  - spin: {speed_rpm: 60, duration_s: 1e-300}", "segments[0].spin.duration_s",
          "at least one control sample"),
-        ("  - dwell: {duration_s: 1e-300}", "segments[0].dwell.duration_s", "[0.001, inf) s"),
+        ("  - dwell: {duration_s: 1e-300}", "segments[0].dwell.duration_s", "[0.001, 599.8] s"),
         ("  - move: {to_mm: 10, speed_mm_s: 1e9}", "segments[0].move.speed_mm_s",
-         "(0, 20000] mm/s"),
+         "[0.0333444, 20000] mm/s"),
         ("  - screw: {pitch_mm: 1, turns: 1e-300, rate_turns_s: 1}", "segments[0].screw.turns",
          "ramp_s <= |turns|/rate_turns_s"),
         ("  - dwell: {duration_s: 0.1}\n    load: {bogus: 1}", "segments[0].load.bogus",
@@ -662,6 +756,181 @@ def test_a_task_segment_is_checked_whole_before_anything_is_written(
     task.write_text(TASK_HEAD + segment + "\n")
     refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
     assert not (tmp_path / "o").exists()
+
+
+# the third round: a task no run could carry (internal errors, a 23 GB trajectory), ranges
+# said whole, and fields that would be silently unused
+@pytest.mark.parametrize(
+    "segment, field, allowed",
+    [
+        # 2·10 mm / 1e-300 mm/s: a 2e301 s motion (OverflowError: an internal error before)
+        ("  - move: {to_mm: 10, speed_mm_s: 1e-300}", "segments[0].move.speed_mm_s",
+         "[0.0333444, 20000] mm/s: the motion over at least one control sample (1 ms) and "
+         "at most 599.8 s"),
+        ("  - spin: {speed_rpm: 60, duration_s: 1e300}", "segments[0].spin.duration_s",
+         "[0.001, 599.8] s"),  # OverflowError before
+        # a 5e7 s helix: its trajectory filled 23 GB before the sum of timeouts was checked
+        ("  - screw: {pitch_mm: 1e-9, turns: 1e9, rate_turns_s: 20}", "segments[0].screw.turns",
+         "at most 14988.7 turns either way (at 25 turns/s, max_speed_rpm, within 599.8 s"),
+        ("  - screw: {pitch_mm: 1, turns: 20, rate_turns_s: 0.01}",
+         "segments[0].screw.rate_turns_s", "[0.0333584, 25] turns/s"),
+        ("  - rotate: {turns: 1e6, speed_rpm: 600}", "segments[0].rotate",
+         "a motion of at most 2.6991e+06° (at 1500 rpm, the supervisor's top speed"),
+        ("  - rotate: {turns: 10, speed_rpm: 1e-3}", "segments[0].rotate.speed_rpm",
+         "[2.00067, 1500] rpm"),
+        ("  - dwell: {duration_s: 0.1}\n    timeout_s: 0", "segments[0].timeout_s",
+         "[0.1, 599.8] s (at least the motion it bounds"),
+        ("  - dwell: {duration_s: 0.1}\n    timeout_s: -1", "segments[0].timeout_s", "[0.1, 599.8]"),
+        ("  - dwell: {duration_s: 0.1}\n    timeout_s: .inf", "segments[0].timeout_s",
+         "[0.1, 599.8]"),  # was refused with "(0, inf) s", which reads as if inf were in
+        ("  - wait: {}\n    until: {force: {above_n: 10}}\n    timeout_s: 1e300",
+         "segments[0].timeout_s", "(0, 599.8] s"),
+        ("  - dwell: {duration_s: 0.001}\n" * 300, "segments",
+         "at most 599.8 s in all (the duration cap of a run, 600 s, less the 0.2 s safe tail)"),
+        ("  - move: {to_mm: 10, speed_mm_s: 40}\n    until: {settled: {tol_mm: 1e300}}",
+         "segments[0].until.settled.tol_mm", "(0, 150) mm (narrower than the stroke)"),
+        ("  - rotate: {by_deg: 90, speed_rpm: 60}\n    until: {settled: {tol_deg: 720}}",
+         "segments[0].until.settled.tol_deg", "(0, 360) ° (narrower than a turn)"),
+        ("  - wait: {duration_s: 1}\n    until: {force: {above_n: 10}}",
+         "segments[0].wait.duration_s", "no fields here"),  # "one of " and nothing before
+    ],
+)  # fmt: skip
+def test_a_task_no_run_could_carry_is_refused_first(tmp_path, segment, field, allowed):
+    task = tmp_path / "task.yaml"
+    task.write_text(TASK_HEAD + segment + "\n")
+    refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "head, field, allowed",
+    [
+        ("controllers: {linear: {reference.kind: sine}}\n", "controllers.linear.reference.kind",
+         "other than reference.* (the task's segments are the references)"),  # unused before
+        ("controllers: {third: {}}\n", "controllers.third: an empty mapping {}",
+         "linear or rotary"),  # "a mapping (0 keys: )" before
+    ],
+)  # fmt: skip
+def test_task_controllers_refuse_what_a_task_never_reads(tmp_path, head, field, allowed):
+    task = tmp_path / "task.yaml"
+    task.write_text(head + TASK_HEAD + "  - dwell: {duration_s: 0.1}\n")
+    refused("task", task, "--out", tmp_path / "o", field=field, allowed=allowed)
+
+
+# --------------------------------------------------------------- pneu bench angle
+@pytest.mark.parametrize(
+    "extra, field, allowed",
+    [
+        (["--only", "plant"], "--only: 'plant'", "not with 'pneu bench angle'"),  # was 'True'
+        (["--seed", str(2**32 - 1)], "--seed: 4294967295",  # was '--seed + --samples'
+         "[0, 4294967255] (with --samples 40"),
+        (["--safety", "/dev/zero"], "--safety: /dev/zero", "not a regular file"),  # unnamed
+        (["--samples", "0"], "--samples", "[1, 1000]"),
+        (["--serial", "--workers", "2"], "--workers", "not with --serial"),
+        (["--overwrite"], "--overwrite", "only with --out"),
+    ],
+)  # fmt: skip
+def test_bench_angle_options_are_refused_naming_the_option(tmp_path, extra, field, allowed):
+    refused("bench", "angle", *extra, field=field, allowed=allowed)
+    assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------ pneu security
+@pytest.mark.parametrize(
+    "domain, argv, field, allowed",
+    [
+        ("\u0663", [], "ROS_DOMAIN_ID", "0-232 in digits 0-9"),  # an Arabic-Indic 3: Python's int
+        (None, [], "ROS_DOMAIN_ID: '(unset)'", "0-232"),
+        ("233", [], "ROS_DOMAIN_ID", "0-232"),
+        ("5", ["--operator", "a" * 50], "--operator: 'aaaaaaaaaaaa... (50 characters)'",
+         "at most 49 characters (the enclave's certificate name"),  # sros2 failed at the end
+        ("5", ["--operator", "bad name"], "--operator", "letters, digits and _"),
+        ("5", ["--operator", "bob", "--operator", "bob"], "--operator", "each name once"),
+    ],
+)  # fmt: skip
+def test_security_refuses_domains_and_operators_first(tmp_path, monkeypatch, domain, argv,
+                                                      field, allowed):  # fmt: skip
+    if domain is None:
+        monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)
+    else:
+        monkeypatch.setenv("ROS_DOMAIN_ID", domain)
+    refused("security", tmp_path / "ks", *argv, field=field, allowed=allowed)
+    assert not (tmp_path / "ks").exists()
+
+
+def test_security_checks_the_keystore_location_first(tmp_path, monkeypatch):
+    """Under a file or on a full or read-only location the keystore was found unwritable by
+    sros2, after the checks (exit 1, a part of it made)."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", "5")
+    (tmp_path / "f").write_text("")
+    refused("security", tmp_path / "f" / "ks", field="KEYSTORE",
+            allowed="a location under a directory")  # fmt: skip
+    refused("security", tmp_path / "f", field="KEYSTORE", allowed="a directory")
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "keep.txt").write_text("mine")
+    refused("security", tmp_path / "d", field="KEYSTORE", allowed="a keystore this command made")
+    real = os.statvfs
+
+    class Ro:
+        def __init__(self, path):
+            st = real(path)
+            self.f_frsize, self.f_bavail, self.f_flag = st.f_frsize, st.f_bavail, os.ST_RDONLY
+
+    monkeypatch.setattr(os, "statvfs", Ro)
+    refused("security", tmp_path / "ks", field="KEYSTORE", allowed="read-only file system")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d", "f"]
+
+
+# --------------------------------------------- found by the longer property run
+def test_sweep_names_its_plant_file(tmp_path, short_bag):
+    """A bag given as --plant: 'pneu sweep: error: PATH: not UTF-8 text' named no option."""
+    refused("sweep", "--samples", "1", "--experiment", "smooth_step_eq38", "--plant",
+            short_bag, "--out", tmp_path / "o", field="--plant", allowed="not UTF-8 text")  # fmt: skip
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_refused_table_is_shown_by_its_size(tmp_path):
+    """An unknown key holding a 17-value table (a copied valve_du_table): the line showed
+    every value and ran to 359 characters."""
+    text = config_file("controllers.yaml").read_text()
+    table = "[" + ", ".join(f"{0.3 * i:.2f}" for i in range(17)) + "]"
+    bad = tmp_path / "controllers.yaml"
+    bad.write_text(text.replace("    pid:\n", f"    valve_du_table_x: {table}\n    pid:\n", 1))
+    refused(*RUN, "--out", tmp_path / "o", "--controllers", bad, field="valve_du_table_x",
+            allowed="no such parameter")  # fmt: skip
+    assert "a list of 17 items" in pneu(*RUN, "--out", tmp_path / "o", "--controllers", bad)[2]
+
+
+# ------------------------------------------------------------ the parser itself
+@pytest.mark.parametrize(
+    "argv, allowed",
+    [
+        (["recover", "a.mcap", "b.mcap"], "unrecognized arguments: b.mcap"),
+        ([*RUN, "\u2014duration", "1"], "unrecognized arguments: \u2014duration 1; did you mean "
+         "--duration?"),  # a dash a word processor made typographic
+        ([*RUN, "--durations", "1"], "did you mean --duration?"),
+    ],
+)  # fmt: skip
+def test_an_unknown_argument_is_refused_by_its_subcommand(tmp_path, argv, allowed):
+    """argparse's own line was ``pneu: error: unrecognized arguments`` whatever the
+    subcommand; now the subcommand's, with the option the token resembles."""
+    line = refused(*argv, "--out", tmp_path / "o", field="unrecognized", allowed=allowed)
+    assert line.endswith(f"(see pneu {argv[0]} --help)")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_closed_stdout_pipe_keeps_the_exit_code(tmp_path):
+    """``pneu run ... | head -0``: the reader gone, the run still finishes its files and exits
+    with its own code (3: the supervisor acted), not 0 (a BrokenPipeError took the code)."""
+    out = tmp_path / "o"
+    proc = subprocess.Popen([*P.PNEU, *RUN[:-1], "0.3", "--fault",
+                             "controller_nan:start_s=0.02,duration_s=0.1", "--out", out],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    proc.stdout.close()  # before anything was printed
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=300) == 3, err
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert json.loads((out / "metrics.json").read_text())["safety_stopped"], err
 
 
 if __name__ == "__main__":

@@ -103,7 +103,7 @@ def test_conditions_are_parsed_in_si():
             [{"move": {"to_mm": 1.0, "speed_mm_s": 1.0}, "until": {"settled": {"tol_mm": -1}}}],
             {},
             "segments[0].until.settled.tol_mm",
-            "(0, inf)",
+            "(0, 150) mm (narrower than the stroke)",
         ),
         ([{"wait": {}}], {}, "segments[0].until", "a condition"),
         (

@@ -188,8 +188,16 @@ def test_only_the_active_axes_and_no_state_for_open_loop():
 
 
 def test_port_in_use_is_one_line_naming_it(server):
-    with pytest.raises(LiveError, match=rf"cannot serve on 127.0.0.1:{server.port}: .*in use"):
+    with pytest.raises(LiveError, match=rf"--live: {server.port} refused; .*in use.*--live 0"):
         LiveServer(port=server.port)
+
+
+@pytest.mark.parametrize("host", ["nohost.invalid", "999.1.1.1", "192.0.2.1"])
+def test_a_host_not_of_this_machine_is_refused_naming_live_host(host):
+    """An unknown name, an invalid address, an address of another machine: the line names
+    --live-host (it said 'live view: cannot serve on ...')."""
+    with pytest.raises(LiveError, match=rf"^--live-host: '{host}' refused; allowed: a name"):
+        LiveServer(port=0, host=host)
 
 
 @pytest.mark.parametrize(

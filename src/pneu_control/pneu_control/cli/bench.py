@@ -201,6 +201,37 @@ _ANGLE_ONLY = (
 )  # fmt: skip
 
 
+def _angle_options(args: argparse.Namespace) -> tuple[int, int]:
+    """(samples, seed) of ``pneu bench angle``, every option checked."""
+    from pneu_msgs_py.params.core import ParamError
+
+    from pneu_control.experiment.session import SEED_MAX, check_seed
+
+    if args.only:
+        raise ParamError(
+            "--only", ",".join(args.only), "not with 'pneu bench angle' (speed groups)"
+        )
+    if args.quick:
+        raise ParamError("--quick", True, "not with 'pneu bench angle'")
+    samples = 40 if args.samples is None else args.samples
+    seed = 0 if args.seed is None else args.seed
+    if not 1 <= samples <= MAX_ANGLE_SAMPLES:
+        raise ParamError("--samples", samples, f"an integer in [1, {MAX_ANGLE_SAMPLES}]")
+    check_seed(seed)
+    if seed + samples > SEED_MAX:  # the plants draw seeds seed .. seed + samples
+        raise ParamError(
+            "--seed",
+            seed,
+            f"an integer in [0, {SEED_MAX - samples}] (with --samples {samples}: "
+            f"the draws' seeds up to --seed + {samples} stay within 2^32 - 1)",
+        )
+    if args.workers is not None and not 1 <= args.workers <= 1024:
+        raise ParamError("--workers", args.workers, "an integer in [1, 1024]")
+    if args.serial and args.workers is not None:
+        raise ParamError("--workers", args.workers, "not with --serial (one process)")
+    return samples, seed
+
+
 def run_angle(args: argparse.Namespace) -> int:
     """``pneu bench angle``: plan, run and print the angle benchmark (JSON with ``--json``),
     ``--out DIR``: also its files; the exit code."""
@@ -211,21 +242,9 @@ def run_angle(args: argparse.Namespace) -> int:
 
     from pneu_control.bench import angle
     from pneu_control.cli.progress import progress_bar, progress_to
-    from pneu_control.experiment.session import check_seed
     from pneu_control.sweep.executors import default_workers
 
-    if args.only or args.quick:
-        raise ParamError("--only" if args.only else "--quick", True, "not with 'pneu bench angle'")
-    samples = 40 if args.samples is None else args.samples
-    seed = 0 if args.seed is None else args.seed
-    if not 1 <= samples <= MAX_ANGLE_SAMPLES:
-        raise ParamError("--samples", samples, f"an integer in [1, {MAX_ANGLE_SAMPLES}]")
-    check_seed(seed)
-    check_seed(seed + samples, "--seed + --samples")
-    if args.workers is not None and not 1 <= args.workers <= 1024:
-        raise ParamError("--workers", args.workers, "an integer in [1, 1024]")
-    if args.serial and args.workers is not None:
-        raise ParamError("--workers", args.workers, "not with --serial (one process)")
+    samples, seed = _angle_options(args)
     claim = None
     if args.out is not None:
         claim = OutputDir(
@@ -236,6 +255,10 @@ def run_angle(args: argparse.Namespace) -> int:
         ).check()
     elif args.overwrite:
         raise ParamError("--overwrite", True, "only with --out")
+    from pneu_driver.safety import load_safety_params
+
+    with from_option("--safety" if args.safety else None):  # its errors name it, not the plant
+        load_safety_params(args.safety)
     with from_option("--plant" if args.plant else None):
         bench = angle.plan_angle_bench(
             samples=samples,

@@ -66,6 +66,27 @@ def resolve_bags(bags: list[str]) -> list[str]:
     return out
 
 
+def _axes(axis: str | None, records: list, bags: list[str]) -> tuple[str, ...] | None:
+    """The axes to fit (None: every excited one); an axis the bags do not excite is refused
+    (it was found after the other axes' whole fit, or as 'fitting ... to 0 bag(s)')."""
+    from pneu_control.sysid.identify import excited_axes
+
+    found = excited_axes(records)
+    if not found:
+        raise ParamError(
+            "BAG",
+            ", ".join(bags),
+            "bags that excite an axis (a design or a valve command that varies: pneu excite)",
+        )
+    if axis is None:
+        return None
+    axes = ("linear", "rotary") if axis == "both" else (axis,)
+    for a in axes:
+        if a not in found:
+            raise ParamError("--axis", axis, f"an axis the bags excite ({', '.join(found)})")
+    return axes
+
+
 def run(args: argparse.Namespace) -> int:
     """``pneu identify``: fit the plant to the bags, write the plant.yaml and its report; the exit
     code."""
@@ -88,21 +109,15 @@ def run(args: argparse.Namespace) -> int:
         with located(base_path, base_tree):
             base = params_from_tree(base_tree if base_tree is not None else {})
     t0 = time.perf_counter()
-    records = []
+    records, lines = [], []
     for bag in bags:
         rec = load_record(bag)
-        print(
-            f"read {rec.path}: {rec.n} samples, axes {', '.join(rec.commanded) or '-'}",
-            file=sys.stderr,
-        )
-        for note in rec.notes:
-            print(f"  {note}", file=sys.stderr)
+        lines.append(f"read {rec.path}: {rec.n} samples, axes {', '.join(rec.commanded) or '-'}")
+        lines += [f"  {note}" for note in rec.notes]
         records.append(rec)
-    axes = (
-        None
-        if args.axis is None
-        else (("linear", "rotary") if args.axis == "both" else (args.axis,))
-    )
+    axes = _axes(args.axis, records, bags)  # refused before a line is printed
+    for line in lines:
+        print(line, file=sys.stderr)
     bar = progress_bar(1, "pneu identify", unit="stage")  # total set by identify's first call
     try:
         ident = identify(

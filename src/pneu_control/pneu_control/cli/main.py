@@ -11,6 +11,7 @@ signal N (SIGHUP 129, SIGINT 130, SIGTERM 143).
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
 import re
@@ -113,6 +114,63 @@ class _Parser(argparse.ArgumentParser):
             given[action.dest] = values
         return super()._get_values(action, arg_strings)
 
+    def parse_args(self, args=None, namespace=None):
+        # an argument nobody takes is refused by the subcommand it was given to (argparse's own
+        # line says "pneu: error:" whatever the subcommand), with the option it resembles
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            sub = getattr(self, "commands", {}).get(getattr(ns, "command", None), self)
+            sub.error(f"unrecognized arguments: {' '.join(extras)}{_close_option(extras, sub)}")
+        return ns
+
+
+def _close_option(extras: list[str], parser: argparse.ArgumentParser) -> str:
+    """``; did you mean --duration?`` for the first extra that resembles an option of ``parser``
+    (a typo, an abbreviation that fits none, a dash turned into a typographic one)."""
+    import difflib
+
+    known = [o for a in parser._actions for o in a.option_strings if o.startswith("--")]
+    for text in extras:
+        word = re.sub(r"^[\u2010-\u2015\u2212-]+", "--", text.split("=", 1)[0])
+        close = difflib.get_close_matches(word, known, n=1, cutoff=0.7)
+        given = text.split("=", 1)[0]
+        if word.startswith("--") and close and given not in known:  # not one put after '--'
+            return f"; did you mean {close[0]}?"
+    return ""
+
+
+class _PipeSafe:
+    """stdout whose reader may go away (``| head``): what is written after is dropped and the
+    command goes on, so its files are finished and its exit code is its own (a supervisor stop
+    stays 3)."""
+
+    def __init__(self, stream) -> None:
+        self._s = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._s.write(text)
+        except BrokenPipeError:
+            self._drop()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._s.flush()
+        except BrokenPipeError:
+            self._drop()
+
+    def _drop(self) -> None:
+        try:  # the descriptor onto /dev/null: the stream's last flush, at exit, succeeds too
+            fd = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(fd, self._s.fileno())
+            os.close(fd)
+        except (OSError, ValueError, AttributeError):
+            self._s = open(os.devnull, "w")  # kept for the command's life
+
+    def __getattr__(self, name: str):
+        return getattr(self._s, name)
+
 
 def _available() -> list[tuple[str, object]]:
     mods = []
@@ -135,10 +193,12 @@ def build_parser() -> argparse.ArgumentParser:
         + "; ".join(f"{code} {text.split(':')[0]}" for code, text in exits.EXIT_CODES),
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    parser.commands = {}
     for name, mod in _available():
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
         p.set_defaults(_run=mod.run)
+        parser.commands[name] = p
     return parser
 
 
@@ -159,6 +219,9 @@ def main(argv: list[str] | None = None, *, restore_signals: bool = True) -> int:
     from pneu_msgs_py.params import inputs
 
     restore = signals.install()  # first: a signal at any moment from here on ends cleanly
+    stdout = sys.stdout
+    if stdout is not None:  # None: started with stdout closed (nothing is printed then)
+        sys.stdout = _PipeSafe(stdout)
     try:
         with inputs.tracking():  # every file the command reads: never one of its outputs
             return _main(argv)
@@ -166,6 +229,9 @@ def main(argv: list[str] | None = None, *, restore_signals: bool = True) -> int:
         print(f"pneu: interrupted by {signals.signal_name(err.signum)}", file=sys.stderr)
         return exits.interrupted_code(err.signum)
     finally:
+        if isinstance(sys.stdout, _PipeSafe):
+            sys.stdout.flush()
+            sys.stdout = stdout
         if restore_signals:
             restore()
         else:
@@ -202,7 +268,7 @@ def _main(argv: list[str] | None) -> int:
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)
         return exits.interrupted_code(signal.SIGINT)
-    except BrokenPipeError:  # stdout closed early (| head): not an error of ours
+    except BrokenPipeError:  # stdout closed early (| head), written past _PipeSafe: not ours
         try:
             sys.stdout = open(os.devnull, "w")
         except OSError:
@@ -234,7 +300,9 @@ def _classify(err: Exception) -> tuple[int, str]:
         return exits.BAD_INPUT, str(err)
     if isinstance(err, OSError):
         where = f"{err.filename}: " if err.filename else ""
-        return exits.RUNTIME_ERROR, f"{where}{err.strerror or err}"
+        full = err.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)
+        why = " (writing the outputs: a full disk or a file-size limit)" if full else ""
+        return exits.RUNTIME_ERROR, f"{where}{err.strerror or err}{why}"
     if isinstance(err, MemoryError):
         return exits.RUNTIME_ERROR, "out of memory"
     return (

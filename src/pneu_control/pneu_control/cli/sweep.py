@@ -234,6 +234,15 @@ def check_executor_args(args: argparse.Namespace, runs: str = "") -> None:
         check_address(args.address)
 
 
+def _read_plant(plant_file: str | None) -> None:
+    """The plant file read now, so that its errors name --plant (plan_sweep's do not)."""
+    from pneu_msgs_py.params.yaml_file import from_option
+    from pneu_sim.physics.plant_file import load_plant_file
+
+    with from_option("--plant" if plant_file else None):
+        load_plant_file(plant_file)
+
+
 def run(args: argparse.Namespace) -> int:
     """``pneu sweep``: plan the sweep, run it, write the table, summary and figures; the exit
     code."""
@@ -274,6 +283,7 @@ def run(args: argparse.Namespace) -> int:
                 config_dir=cfg,
             )
         ]
+    _read_plant(args.plant)
     t0 = time.perf_counter()
     plan = plan_sweep(
         samples=args.samples,

@@ -65,11 +65,20 @@ def _used_by_identify(plant_file: str | None) -> set[str]:
         return set()
     try:
         doc = json.loads(rep.read_text(encoding="utf-8"))
-        return {str(Path(b).resolve()) for b in doc.get("bags", [])}
-    except (OSError, ValueError, TypeError, AttributeError) as err:
+    except (OSError, ValueError) as err:
+        why = f"not JSON: {err}" if isinstance(err, ValueError) else (err.strerror or str(err))
         raise ParamError(
-            "--plant", str(rep), f"a report of pneu identify beside the plant file ({err})"
+            "--plant", str(rep), f"a report of pneu identify beside the plant file ({why})"
         ) from None
+    bags = doc.get("bags", []) if isinstance(doc, dict) else None
+    if not isinstance(bags, list) or not all(isinstance(b, str) for b in bags):
+        raise ParamError(
+            "--plant",
+            str(rep),
+            "a report of pneu identify beside the plant file (a JSON object whose 'bags' "
+            "lists the bags' paths)",
+        )
+    return {str(Path(b).resolve()) for b in bags}
 
 
 def _figure(i: int, bag: str, axis: str) -> str:
@@ -89,6 +98,8 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ParamError(
             "--min-fit", args.min_fit, "a finite percentage <= 100 (a fit is at most 100 %)"
         )
+    if args.overwrite and not args.out:  # nothing to replace: it would be silently ignored
+        raise ParamError("--overwrite", True, "only with --out")
 
 
 def _validation(bag: str, plant, used: set[str], args: argparse.Namespace):
@@ -101,11 +112,27 @@ def _validation(bag: str, plant, used: set[str], args: argparse.Namespace):
     held = str(Path(rec.path).resolve()) not in used
     v = validate_record(rec, plant, mode=args.mode, horizon_s=args.horizon, held_out=held)
     if not v.fits:  # refused before anything is written: nothing of it could be compared
-        why = "; ".join(f"{a}: {av.reason}" for a, av in v.axes.items() if av.reason)
+        why = "; ".join(_why_not(a, av, v.headline) for a, av in v.axes.items())
         raise ParamError(
             "BAG", bag, f"a bag with a stretch to compare, as long as --horizon (none here: {why})"
         )
     return v
+
+
+def _why_not(axis: str, av, headline: str) -> str:
+    """Why ``axis`` has no fit at the judged horizon: not validated at all, or valid only for
+    shorter horizons (then the horizons it has)."""
+    from pneu_control.sysid.validate import horizon_label
+
+    if av.reason:
+        return f"{axis}: {av.reason}"
+    heads = "; ".join(n.removeprefix(f"{axis}: ").split(": ")[0] for n in av.notes)
+    has = ", ".join(horizon_label(h) for h in av.fits)
+    return (
+        f"{axis}: no valid stretch of {horizon_label(headline)}"
+        + (f" ({heads})" if heads else "")
+        + (f"; it has {has}: try --horizon" if has else "")
+    )
 
 
 def _print_report(results) -> None:

@@ -167,6 +167,11 @@ def estimate_noise(records: list[Record], axes: tuple[str, ...]) -> dict[str, No
     return out
 
 
+def excited_axes(records: list[Record]) -> tuple[str, ...]:
+    """The axes some of ``records`` excite (a design, or a valve command that varies)."""
+    return tuple(a for a in ("linear", "rotary") if _excited(records, a))
+
+
 def _excited(records: list[Record], axis: str) -> list[Record]:
     out = []
     for r in records:
@@ -188,7 +193,7 @@ def identify(
 
     ``progress(done, total)``: fit stages begun of at most ``STAGES`` per axis."""
     options = options or FitOptions()
-    axes = axes or tuple(a for a in ("linear", "rotary") if _excited(records, a))
+    axes = axes or excited_axes(records)
     if not axes:
         raise ValueError("no axis is excited in these bags (no design, no varying valve command)")
     notes = [n for r in records for n in (f"{r.name}: {x}" for x in r.notes)]

@@ -46,7 +46,9 @@ goes on with the next segment, the segment reported not reached.
 Every check runs before anything is written, each refusal one line naming the segment
 and the field: the rod inside the supervisor's soft limits, speeds within its limits,
 the angle inside ``limits`` (and within the paper plumbing's one direction), a timeout
-no shorter than the motion it bounds.
+no shorter than the motion it bounds, every motion and timeout, and all the timeouts
+together, within the duration cap of a run (:data:`MAX_TASK_S`), a settled tolerance
+narrower than the stroke or a turn, no ``reference.*`` among the controllers' overrides.
 """
 
 from __future__ import annotations
@@ -58,11 +60,14 @@ from pathlib import Path
 from typing import Any
 
 from pneu_msgs_py.contract.units import DEG_PER_RAD, MM_PER_M
+from pneu_msgs_py.lifecycle.duration import MAX_DURATION_S
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.yaml_file import load_yaml
 
 __all__ = [
     "KINDS",
+    "MAX_TASK_S",
+    "SAFE_TAIL_S",
     "SPIN_RAMP_S",
     "Segment",
     "TaskProgram",
@@ -92,6 +97,10 @@ TIMEOUT_MARGIN_S = 2.0
 # one control sample (the controllers' sample_time_s, the paper's T = 1 ms): a motion that
 # takes less is a step between two samples, which no trajectory can carry
 MIN_MOTION_S = 0.001
+SAFE_TAIL_S = 0.2  # s the run goes on with both valves safe after an abort (seen in the bag)
+# every segment to its timeout, and the safe tail, fit in one run (the duration cap): a
+# motion, a timeout or all of them together longer than this could never run to its end
+MAX_TASK_S = MAX_DURATION_S - SAFE_TAIL_S
 
 
 @dataclass(frozen=True)
@@ -196,8 +205,17 @@ def parse_task(
     out = []
     from pneu_control.task.plan import segment_trajectory
 
+    total_s = 0.0
     for i, raw in enumerate(segs):
         seg = _segment(i, raw, x, th, safety, soft, one_way)
+        total_s += seg.timeout_s
+        if total_s > MAX_TASK_S:  # before its trajectory is built (a day-long one fills memory)
+            raise ParamError(
+                "segments",
+                f"{total_s:.6g} s of timeouts to {seg.label}",
+                f"at most {MAX_TASK_S:g} s in all (the duration cap of a run, "
+                f"{MAX_DURATION_S:g} s, less the {SAFE_TAIL_S:g} s safe tail)",
+            )
         try:  # the trajectory the segment becomes: whatever it refuses, refused here
             segment_trajectory(seg, 0.0)
         except ParamError as err:
@@ -213,7 +231,8 @@ def parse_task(
 def _no_unknown(where: str, data: Mapping, allowed: set[str]) -> None:
     for key in data:
         if key not in allowed:
-            raise ParamError(f"{where}.{key}", data[key], f"one of {', '.join(sorted(allowed))}")
+            known = f"one of {', '.join(sorted(allowed))}" if allowed else "no fields here"
+            raise ParamError(f"{where}.{key}", data[key], known)
 
 
 def _mapping(key: str, v: Any) -> dict[str, Any]:
@@ -230,6 +249,14 @@ def _controllers(v: Any) -> dict[str, dict[str, Any]]:
         if axis not in ("linear", "rotary"):
             raise ParamError(f"controllers.{axis}", sets, "linear or rotary")
         v[axis] = _mapping(f"controllers.{axis}", sets)
+        for key in v[axis]:  # the segments are the references: one set here would be unused
+            if str(key) == "reference" or str(key).startswith("reference."):
+                raise ParamError(
+                    f"controllers.{axis}.{key}",
+                    v[axis][key],
+                    "a controller parameter other than reference.* (the task's segments "
+                    "are the references)",
+                )
         if axis == "rotary" and v[axis].get("rotary_control", "angle") != "angle":
             raise ParamError(
                 "controllers.rotary.rotary_control",
@@ -306,19 +333,18 @@ def _segment(i: int, raw: Any, x: float, th: float, safety, limits, one_way: boo
                     f"an angle inside the soft limits [{limits[0]:g}, {limits[1]:g}]° "
                     "(the tool's range, angle_margin_deg inside)",
                 )
-    until = _until(where, raw.get("until"), kind)
-    default_timeout = dur + TIMEOUT_MARGIN_S
-    timeout = (
-        _number(f"{where}.timeout_s", raw["timeout_s"], "s", positive=True)
-        if "timeout_s" in raw
-        else default_timeout
-    )
-    if timeout < dur:
-        raise ParamError(
-            f"{where}.timeout_s",
-            timeout,
-            f"[{dur:.6g}, inf) s (the motion it bounds takes {dur:.6g} s)",
-        )
+    until = _until(where, raw.get("until"), kind, safety)
+    timeout = min(dur + TIMEOUT_MARGIN_S, MAX_TASK_S)  # the default
+    if "timeout_s" in raw:
+        timeout = _number(f"{where}.timeout_s", raw["timeout_s"], "s")
+        if not (timeout >= dur and 0.0 < timeout <= MAX_TASK_S):
+            raise ParamError(
+                f"{where}.timeout_s",
+                timeout,
+                (f"[{dur:.6g}" if dur > 0.0 else "(0") + f", {MAX_TASK_S:g}] s (at least the "
+                f"motion it bounds, {dur:.6g} s; at most the duration cap of a run less the "
+                "safe tail)",
+            )
     if until["kind"] == "settled" and dur + until["for_s"] > timeout:  # could never end it
         raise ParamError(
             f"{where}.until.settled.for_s",
@@ -369,8 +395,11 @@ def _forward(key: str, value: float, one_way: bool, unit: str) -> None:
         )
 
 
-def _duration(at: str, args: dict, delta: float, speed_key: str, per_s: float) -> float:
-    """Smooth-step duration from a peak speed (2Δ/D) or given; 0 for no motion."""
+def _duration(
+    at: str, args: dict, delta: float, speed_key: str, per_s: float, top: float = math.inf
+) -> float:
+    """Smooth-step duration from a peak speed (2Δ/D) or given; 0 for no motion. ``top``: the
+    fastest the supervisor allows (in the speed's unit)."""
     if "duration_s" in args and speed_key in args:
         raise ParamError(at, sorted(args), f"one of {speed_key}, duration_s")
     if "duration_s" in args:
@@ -380,13 +409,23 @@ def _duration(at: str, args: dict, delta: float, speed_key: str, per_s: float) -
     unit = speed_key.split("_", 1)[1].replace("_", "/")
     v = _number(f"{at}.{speed_key}", args[speed_key], unit, positive=True)
     dur = 2.0 * abs(delta) / (v * per_s) if delta != 0.0 else 0.0
-    if 0.0 < dur < MIN_MOTION_S:
-        fastest = 2.0 * abs(delta) / (MIN_MOTION_S * per_s)
+    if dur > 0.0 and not MIN_MOTION_S <= dur <= MAX_TASK_S:
+        slowest, fastest = (2.0 * abs(delta) / (t * per_s) for t in (MAX_TASK_S, MIN_MOTION_S))
+        if slowest > top:  # no speed does it: the way is too long for one run
+            w_unit = "mm" if speed_key == "speed_mm_s" else "°"
+            raise ParamError(
+                at,
+                f"{abs(delta):.6g}{w_unit}",
+                f"a motion of at most {top * per_s * MAX_TASK_S / 2.0:.6g}{w_unit} (at "
+                f"{top:g} {unit}, the supervisor's top speed, within {MAX_TASK_S:g} s: the "
+                "duration cap)",
+            )
         raise ParamError(
             f"{at}.{speed_key}",
             v,
-            f"(0, {fastest:.6g}] {unit}: the motion over at least one control sample "
-            f"({MIN_MOTION_S * 1e3:g} ms)",
+            f"[{slowest:.6g}, {min(fastest, top):.6g}] {unit}: the motion over at least one "
+            f"control sample ({MIN_MOTION_S * 1e3:g} ms) and at most {MAX_TASK_S:g} s (the "
+            "duration cap)",
         )
     return dur
 
@@ -394,8 +433,13 @@ def _duration(at: str, args: dict, delta: float, speed_key: str, per_s: float) -
 def _motion_s(key: str, v: Any) -> float:
     """A duration of a motion: at least one control sample (:data:`MIN_MOTION_S`)."""
     d = _number(key, v, "s", positive=True)
-    if d < MIN_MOTION_S:
-        raise ParamError(key, d, f"[{MIN_MOTION_S:g}, inf) s: at least one control sample")
+    if not MIN_MOTION_S <= d <= MAX_TASK_S:
+        raise ParamError(
+            key,
+            d,
+            f"[{MIN_MOTION_S:g}, {MAX_TASK_S:g}] s: at least one control sample, at most the "
+            "duration cap of a run less the safe tail",
+        )
     return d
 
 
@@ -424,7 +468,7 @@ def _plan(kind, args, at, x, th, safety, one_way) -> tuple[float, float, float]:
                 "(the motor drives one way); plumbing: bidirectional turns both ways",
             )
         _forward(f"{at}.{g}", v, one_way, "turns" if g == "turns" else "°")
-        dur = _duration(at, args, d_deg, "speed_rpm", DEG_S_PER_RPM)
+        dur = _duration(at, args, d_deg, "speed_rpm", DEG_S_PER_RPM, safety.max_speed_rpm)
         if dur > 0.0:
             _check_rpm(f"{at}", 2.0 * d_deg / dur / DEG_S_PER_RPM, safety)
         return x, th + d_deg / DEG_PER_RAD, dur
@@ -450,6 +494,22 @@ def _plan(kind, args, at, x, th, safety, one_way) -> tuple[float, float, float]:
         rate = _number(f"{at}.rate_turns_s", args["rate_turns_s"], "turns/s", positive=True)
         ramp = _motion_s(f"{at}.ramp_s", args.get("ramp_s", 0.25))
         _check_rpm(f"{at}.rate_turns_s", rate * 60.0, safety)
+        if abs(turns) / rate + ramp > MAX_TASK_S:  # a helix longer than any run
+            top = safety.max_speed_rpm / 60.0
+            slowest = abs(turns) / (MAX_TASK_S - ramp) if ramp < MAX_TASK_S else math.inf
+            if slowest > top:  # no rate does it: too many turns for one run
+                raise ParamError(
+                    f"{at}.turns",
+                    turns,
+                    f"at most {top * (MAX_TASK_S - ramp):.6g} turns either way (at {top:g} "
+                    f"turns/s, max_speed_rpm, within {MAX_TASK_S:g} s: the duration cap)",
+                )
+            raise ParamError(
+                f"{at}.rate_turns_s",
+                rate,
+                f"[{slowest:.6g}, {top:g}] turns/s: the helix ({abs(turns):g} turns, ramp_s "
+                f"{ramp:g} s) within {MAX_TASK_S:g} s (the duration cap), at most max_speed_rpm",
+            )
         if ramp > abs(turns) / rate:  # the rate is reached and left within the turns
             raise ParamError(
                 f"{at}.ramp_s" if "ramp_s" in args else f"{at}.turns",
@@ -465,7 +525,7 @@ def _plan(kind, args, at, x, th, safety, one_way) -> tuple[float, float, float]:
     return x, th, 0.0  # wait
 
 
-def _until(where: str, v: Any, kind: str) -> dict[str, Any]:
+def _until(where: str, v: Any, kind: str, safety: Any) -> dict[str, Any]:
     if v is None:
         if kind in ("move", "rotate", "screw"):
             return {"kind": "settled", "tol_mm": DEFAULT_TOL_MM, "tol_deg": DEFAULT_TOL_DEG,
@@ -485,14 +545,11 @@ def _until(where: str, v: Any, kind: str) -> dict[str, Any]:
         return {"kind": "time"}
     if ck == "settled":
         _no_unknown(at, body, {"tol_mm", "tol_deg", "for_s"})
+        stroke_mm = safety.stroke_m * MM_PER_M
         return {
             "kind": "settled",
-            "tol_mm": _number(
-                f"{at}.tol_mm", body.get("tol_mm", DEFAULT_TOL_MM), "mm", positive=True
-            ),
-            "tol_deg": _number(
-                f"{at}.tol_deg", body.get("tol_deg", DEFAULT_TOL_DEG), "°", positive=True
-            ),
+            "tol_mm": _tolerance(at, body, "tol_mm", DEFAULT_TOL_MM, stroke_mm, "the stroke"),
+            "tol_deg": _tolerance(at, body, "tol_deg", DEFAULT_TOL_DEG, 360.0, "a turn"),
             "for_s": _number(f"{at}.for_s", body.get("for_s", DEFAULT_FOR_S), "s", positive=True),
         }
     if ck == "pressure":
@@ -516,6 +573,16 @@ def _until(where: str, v: Any, kind: str) -> dict[str, Any]:
             f"[{-_FORCE_MAX_N:.4g}, {_FORCE_MAX_N:.4g}] N (the sensors' full scale on the piston)",
         )
     return {"kind": "force", "side": side, "value": value}
+
+
+def _tolerance(at: str, body: Mapping, key: str, default: float, widest: float, what: str):
+    """A settled tolerance: narrower than ``widest`` (the stroke, a turn), which always holds
+    and so would settle nothing."""
+    unit = "mm" if key == "tol_mm" else "°"
+    tol = _number(f"{at}.{key}", body.get(key, default), unit)
+    if not 0.0 < tol < widest:
+        raise ParamError(f"{at}.{key}", tol, f"(0, {widest:g}) {unit} (narrower than {what})")
+    return tol
 
 
 def _sensed() -> tuple[tuple[float, float], float]:

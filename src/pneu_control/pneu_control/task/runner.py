@@ -22,7 +22,7 @@ from typing import Any
 from pneu_msgs_py.contract.units import DEG_PER_RAD, MM_PER_M
 
 from pneu_control.controller.trajectory import from_stamped, references, to_stamped
-from pneu_control.task.program import Segment, TaskProgram
+from pneu_control.task.program import SAFE_TAIL_S, Segment, TaskProgram
 
 __all__ = [
     "SAFE_TAIL_S",
@@ -34,7 +34,6 @@ __all__ = [
     "rod_force",
 ]
 
-SAFE_TAIL_S = 0.2  # s the run goes on with both valves safe after an abort (seen in the bag)
 # a segment's trajectory starts this long after the sample that started it: time for a
 # trajectory published over ROS to reach the controllers (the in-process runner waits too,
 # so both give the same numbers)

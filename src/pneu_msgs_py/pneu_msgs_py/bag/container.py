@@ -18,6 +18,7 @@ was cut short (``pneu recover`` makes it whole).
 
 from __future__ import annotations
 
+import errno
 import os
 import zlib
 from collections.abc import Mapping
@@ -94,7 +95,12 @@ class McapContainer:
         self._write(R.MAGIC + R.record_bytes(M.Header(profile=PROFILE, library=library)))
 
     def _write(self, data: bytes) -> None:
-        self._f.write(data)
+        try:
+            self._f.write(data)
+        except OSError as e:  # a full disk, a file-size limit: one line naming the bag
+            full = e.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)
+            why = " (a full disk or a file-size limit)" if full else ""
+            raise BagWriteError(self.path, f"write failed: {e.strerror or e}{why}") from None
         self._crc = zlib.crc32(data, self._crc)
         self._pos += len(data)
 

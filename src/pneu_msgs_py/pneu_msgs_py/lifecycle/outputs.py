@@ -15,7 +15,8 @@ The rules (every command that writes follows them, docs/cli.md repeats them):
    finished artefacts, or partial ones that say so (after a hard kill:
    ``pneu recover run.mcap.partial --out run.mcap``).
 4. With ``overwrite``, the artefacts this command writes (and their partials)
-   are removed when the claim is taken; other files are left alone.
+   are removed when the claim is taken; other files are left alone. A claim left by an
+   exception (a failed write) removes its partial files.
 5. **Writable, and not anything else.** The check refuses an empty path, a
    location under a file, one that cannot be written (permissions, a read-only
    file system) or is full (less than :data:`MIN_FREE_BYTES` free), and an
@@ -37,7 +38,15 @@ from pathlib import Path
 from pneu_msgs_py.params.core import ParamError
 from pneu_msgs_py.params.inputs import is_input
 
-__all__ = ["LOCK_NAME", "MIN_FREE_BYTES", "PARTIAL", "OutputDir", "OutputFile", "is_same_path"]
+__all__ = [
+    "LOCK_NAME",
+    "MIN_FREE_BYTES",
+    "PARTIAL",
+    "OutputDir",
+    "OutputFile",
+    "check_writable_dir",
+    "is_same_path",
+]
 
 LOCK_NAME = ".pneu.lock"
 PARTIAL = ".partial"
@@ -62,6 +71,15 @@ def _check_names(p: Path, q: Path, field: str, shown: str, longest: str = "") ->
             raise ParamError(
                 field, shown, f"names of at most {name_max} bytes ({name[:40]}... is longer)"
             )
+
+
+def _check_fits(p: Path, field: str, shown: str, longest: str = "") -> None:
+    """Before anything looks at ``p``: its new names (and ``longest``) fit the file system (a
+    look at a longer name fails with ENAMETOOLONG, an error, not "it does not exist")."""
+    q = p
+    while not os.path.lexists(q) and q != q.parent:
+        q = q.parent
+    _check_names(p, q, field, shown, longest)
 
 
 def _check_location(p: Path, field: str, shown: str, longest: str = "") -> None:
@@ -93,6 +111,15 @@ def _check_location(p: Path, field: str, shown: str, longest: str = "") -> None:
             f"a location with free space (at least {MIN_FREE_BYTES // 2**20} MiB; "
             f"{free} bytes free on {q}'s file system)",
         )
+
+
+def check_writable_dir(path: str | os.PathLike, field: str) -> None:
+    """A directory another tool fills (``pneu security``'s keystore): rule 5 before anything is
+    created (not empty, names that fit, under a directory, writable, not full)."""
+    p = Path(path)
+    _check_text(p, field)
+    _check_fits(p, field, str(p))
+    _check_location(p, field, str(p))
 
 
 def _check_replaceable(f: Path, field: str, shown: str) -> None:
@@ -188,6 +215,8 @@ class OutputDir:
         """Refuse (ParamError naming the option) before anything is created."""
         p = self.path
         _check_text(p, self.field)
+        longest = max((a + PARTIAL for a in self.artefacts), key=len, default="")
+        _check_fits(p, self.field, str(p), longest)
         if p.exists() and not p.is_dir():
             raise ParamError(self.field, str(p), "a directory (this is a file)")
         for name in (*self.artefacts, *(a + PARTIAL for a in self.artefacts)):
@@ -200,7 +229,6 @@ class OutputDir:
                     f"be replaced by {name})",
                 )
             _check_replaceable(p / name, self.field, str(p))
-        longest = max((a + PARTIAL for a in self.artefacts), key=len, default="")
         _check_location(p, self.field, str(p), longest)
         held = self._holdings() if p.is_dir() else []
         if held and not self.overwrite:
@@ -241,6 +269,8 @@ class OutputDir:
         return self
 
     def __exit__(self, *exc: object) -> None:
+        if exc and exc[0] is not None:  # a failed write (a full disk): no half-written file
+            self.discard()
         if self._lock is not None:
             _release(self._lock, self.path / LOCK_NAME)
             self._lock = None
@@ -299,6 +329,8 @@ class OutputFile:
     def check(self) -> OutputFile:
         p = self.path
         _check_text(p, self.field)
+        longest = max((self._lock_path.name, self.partial.name), key=len)
+        _check_fits(p.parent, self.field, str(p), longest)
         if not p.name or p.is_dir() or str(p).endswith(os.sep):
             raise ParamError(self.field, str(p), "a file name (this is a directory)")
         if self.suffixes and p.suffix.lower() not in self.suffixes:
@@ -321,7 +353,7 @@ class OutputFile:
                 f"a new file, or --overwrite ({self.partial.name} is left by a command that did "
                 "not finish: pneu recover it, or --overwrite removes it)",
             )
-        _check_location(p.parent, self.field, str(p), self._lock_path.name)
+        _check_location(p.parent, self.field, str(p), longest)
         return self
 
     def __enter__(self) -> OutputFile:
@@ -345,6 +377,8 @@ class OutputFile:
         return self
 
     def __exit__(self, *exc: object) -> None:
+        if exc and exc[0] is not None:  # a failed write (a full disk): no half-written file
+            self.discard()
         if self._lock is not None:
             _release(self._lock, self._lock_path)
             self._lock = None

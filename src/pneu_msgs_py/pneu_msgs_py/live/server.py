@@ -56,6 +56,19 @@ def _foxglove() -> Any:
     return foxglove
 
 
+def _bind_refusal(host: str, port: int, err: Exception) -> str:
+    """One line naming the option the server could not start on: the port (in use, not
+    allowed) or the host (no such name, not an address of this machine)."""
+    text = str(err).removeprefix("Failed to bind port: ")
+    if "in use" in text or "ermission denied" in text:
+        hint = "; --live 0 picks a free port" if port else ""
+        return f"--live: {port} refused; allowed: a port free to serve on ({text}){hint}"
+    return (
+        f"--live-host: {host!r} refused; allowed: a name or address of this machine "
+        f"(127.0.0.1, 0.0.0.0: every interface, ::1) ({text})"
+    )
+
+
 class LiveServer:
     """A Foxglove WebSocket server carrying one run (implements :class:`~pneu_msgs_py.live.sink.RunSink`).
 
@@ -101,8 +114,7 @@ class LiveServer:
         try:
             self._server = fg.start_server(name=name, host=host, port=port, context=self._ctx)
         except RuntimeError as err:  # foxglove's FoxgloveError (bind failure, bad host)
-            hint = "; --live 0 picks a free port" if port else ""
-            raise LiveError(f"live view: cannot serve on {host}:{port}: {err}{hint}") from None
+            raise LiveError(_bind_refusal(host, port, err)) from None
         self.port = int(self._server.port)
         self._closed = False
 

@@ -59,11 +59,13 @@ SHOWN_CHARS = 200  # a refused value is shown up to this long (a path fits): one
 def shown(value: Any) -> str:
     """``value`` as a refusal shows it: its repr, a mapping or list by its size and first
     keys (never a whole YAML tree), long text cut to :data:`SHOWN_CHARS` characters."""
-    if isinstance(value, Mapping):
+    if isinstance(value, Mapping) and not value:
+        text = "an empty mapping {}"
+    elif isinstance(value, Mapping):
         keys = ", ".join(str(k) for k in list(value)[:4]) + (", ..." if len(value) > 4 else "")
         text = f"a mapping ({len(value)} key{'s' * (len(value) != 1)}: {keys})"
-    elif isinstance(value, (list, tuple)) and len(repr(value)) > SHOWN_CHARS:
-        text = f"a list of {len(value)} items"
+    elif isinstance(value, (list, tuple)) and (len(value) > 6 or len(repr(value)) > SHOWN_CHARS):
+        text = f"a list of {len(value)} items"  # a table's values: its size says enough
     else:
         text = repr(value)
     if len(text) > SHOWN_CHARS:
