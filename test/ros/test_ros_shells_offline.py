@@ -303,6 +303,28 @@ def test_run_node_spins_to_the_end_and_leaves_the_rig_safe(world, capsys, monkey
     assert shut == [(49, "")]  # after the last sample, once; the executor parameter declared
 
 
+def test_ctrl_c_while_spinning_ends_the_spin_without_raising_into_a_callback(world, monkeypatch):
+    """SIGINT once the node spins: the spin ends at its next slice, safe_shutdown runs, exit 0
+    (Python's KeyboardInterrupt used to land inside whatever callback was running)."""
+    import os
+    import signal
+
+    world.overrides["/pneu_sim"] = {"mode": "lockstep", "axes": "none", "duration_s": 0.0}
+    import pneu_sim.nodes.sim_node as sn
+
+    shut, ran = [], []
+
+    def watch(self):  # a callback the signal lands in: it runs to its end
+        os.kill(os.getpid(), signal.SIGINT)
+        ran.append(sum(range(10_000)))  # bytecodes after the signal: where it used to raise
+
+    monkeypatch.setattr(sn.SimNode, "_watch", watch)
+    monkeypatch.setattr(sn.SimNode, "safe_shutdown", lambda self: shut.append(True))
+    assert sn.main() == 0
+    assert ran[:1] == [49_995_000] and shut == [True]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+
+
 @pytest.mark.parametrize(
     ("env", "message"),
     [("bogus", "executor: 'bogus' refused; allowed: one of auto, events, single"),

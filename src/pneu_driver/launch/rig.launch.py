@@ -16,12 +16,13 @@ installed ``config/`` (rig.yaml, safety.yaml, controllers.yaml).
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import Shutdown
 from launch_ros.actions import Node
 from pneu_msgs_py.nodes.launch_graph import (
+    IO_SIGTERM_TIMEOUT,
     common_parameters,
     controller_and_logger_nodes,
     hosted_manager,
+    io_exit,
     launch_arguments,
     launch_description,
 )
@@ -48,7 +49,7 @@ def _setup(arg: dict[str, str]) -> list:
         "axes": arg["axes"],
         "backend": arg["backend"],
     }
-    exit_action = [Shutdown(reason="driver stopped")]
+    exit_action = io_exit("rig")
     if arg["deployment"] == "hosted":
         driver = hosted_manager(arg, config, "rig", "pneu_driver", params, on_exit=exit_action)
     else:
@@ -58,6 +59,7 @@ def _setup(arg: dict[str, str]) -> list:
             name="pneu_driver",
             output="screen",
             parameters=[{**params, **common_parameters(arg)}],
+            sigterm_timeout=IO_SIGTERM_TIMEOUT,
             on_exit=exit_action,
         )
     return [driver, *controller_and_logger_nodes(arg, config, mode="realtime", out=arg["out"])]

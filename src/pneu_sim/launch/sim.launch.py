@@ -16,12 +16,13 @@ launch shuts down; the logger then finishes ``<out>/run.mcap``.
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import Shutdown
 from launch_ros.actions import Node
 from pneu_msgs_py.nodes.launch_graph import (
+    IO_SIGTERM_TIMEOUT,
     common_parameters,
     controller_and_logger_nodes,
     hosted_manager,
+    io_exit,
     launch_arguments,
     launch_description,
 )
@@ -82,7 +83,7 @@ def _setup(arg: dict[str, str]) -> list:
         "startup.min_subscribers": 1,
         "startup.wait_for_logger": True,  # the run's metadata needs every node's parameters
     }
-    exit_action = [Shutdown(reason="simulation finished")]
+    exit_action = io_exit("sim")
     if hosted:
         sim = hosted_manager(arg, config, "sim", "pneu_sim", params, on_exit=exit_action)
     else:
@@ -92,6 +93,7 @@ def _setup(arg: dict[str, str]) -> list:
             name="pneu_sim",
             output="screen",
             parameters=[{**params, **common_parameters(arg)}],
+            sigterm_timeout=IO_SIGTERM_TIMEOUT,
             on_exit=exit_action,
         )
     return [sim, *controller_and_logger_nodes(arg, config, mode=arg["mode"], out=arg["out"])]

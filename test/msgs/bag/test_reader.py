@@ -347,6 +347,16 @@ def test_errors_are_bag_errors_with_one_line():
         assert str(e) == "/x/y.mcap: the problem"
 
 
+def test_a_run_directory_whose_rosbag2_recorder_was_killed_reads_its_bag(run, tmp_path):
+    """``out/bag`` without metadata.yaml (``ros2 bag record`` SIGKILLed): ``out`` still stands
+    for it, with the note."""
+    (tmp_path / "out" / "bag").mkdir(parents=True)
+    shutil.copy(run[0], tmp_path / "out" / "bag" / "bag_0.mcap")
+    with pytest.warns(UserWarning, match="no metadata.yaml"):
+        data = read_run(tmp_path / "out", [LIN_CS])
+    assert len(data[LIN_CS]) == N
+
+
 def test_bag_directory_of_our_file(run, tmp_path):
     """A rosbag2-style directory holding our .mcap (no metadata.yaml) is read with a note."""
     d = tmp_path / "dir"

@@ -37,6 +37,14 @@ difference δ between its first command and the last command is added as an
 offset that decays as exp(−t/bumpless_time_s). The first command after a
 switch equals the last one; the TD keeps running through the switch.
 
+``hold(u_v)``: the supervisor holds this axis' valve at ``u_v`` (its safe 5 V: a latched
+fault, the e-stop) and its commands are not applied. Until ``hold(None)`` each update
+computes as usual but returns ``u_v`` and records it as the command on the valve, so the
+observers are fed what was applied; the first update after the release restarts the
+algorithm from its estimates as a switch does (a fresh instance, first command = ``u_v``,
+the offset decaying over ``bumpless_time_s``): the valve takes the controller back
+without a jump, whatever its states did while it was overridden.
+
 The ESO is fed the command that was actually on the valve during the last
 sample period: with ``transport_delay_samples = d`` (DESIGN §3: 1) that is the
 command computed d + 1 samples ago.
@@ -260,6 +268,8 @@ class AxisController:
         built = self._build(params)
         self._commit(built)
         self._pending = None
+        self._held: float | None = None  # the valve value the supervisor holds (V), or None
+        self.n_rejoins = 0  # releases after a hold (restarts from the estimates)
         self._state = ControllerState()
         self.reset()
 
@@ -374,6 +384,27 @@ class AxisController:
             )
         self._pending = self._build(params)
 
+    @property
+    def held(self) -> float | None:
+        """The valve voltage the supervisor holds this axis at (:meth:`hold`), or None."""
+        return self._held
+
+    def hold(self, u_v: float | None) -> None:
+        """The supervisor holds the valve at ``u_v`` (V) -- or releases it (None): see the
+        module docstring. A release restarts the algorithm at the next update, bumplessly
+        from ``u_v`` (a pending parameter set is applied then, as usual)."""
+        if u_v is not None and not (self._u_lo <= u_v <= self._u_hi):
+            raise ParamError("hold", u_v, f"a voltage within [{self._u_lo:g}, {self._u_hi:g}] V")
+        was, self._held = self._held, (None if u_v is None else float(u_v))
+        if was is not None and u_v is None and self._st.started:
+            if self._pending is None:  # the same set, a fresh instance: no wound-up state
+                self._pending = (self._params, self._ref, make_algorithm(self._params, self.axis))
+            self.n_rejoins += 1
+
+    def _out(self, st, inp, u: float) -> float:
+        """``finish`` with the supervisor's hold: the held value is what the valve gets."""
+        return finish(st, inp, u if self._held is None else self._held)
+
     def set_reference(self, ref: Any, start_s: float | None = None) -> None:
         """Follow ``ref``: a callable t -> (r, ṙ, r̈) in SI (m, rad/s or rad), t on this
         controller's time base (s since its first sample).
@@ -459,7 +490,7 @@ class AxisController:
         u = self._alg.update(inp) + self._neutral
         if self._blend != 0.0:
             u = self._blended(u)
-        return finish(st, inp, u)
+        return self._out(st, inp, u)
 
     def _blended(self, u: float) -> float:
         b = self._blend * self._a_blend
@@ -476,7 +507,7 @@ class AxisController:
                 rp, rdp, rddp = self._reference_now()
             cold_inputs(self._c, st, inp, y, th, rp, rdp, rddp)
             u = self._alg.start(inp, None, (_NAN, _NAN, _NAN))
-            return finish(st, inp, u + self._neutral)
+            return self._out(st, inp, u + self._neutral)
         old_alg = self._alg
         u_applied_v = inp.history[0]
         # advance the reference pipeline with the old set, then bring the old algorithm's
@@ -503,7 +534,7 @@ class AxisController:
         u_new = new_alg.start(inp, st.u_last - n, hint) + n
         # bumpless: the first command equals the last one; the offset then decays
         self._blend = (st.u_last - u_new) / self._a_blend  # _blended() decays it once
-        return finish(st, inp, (self._blended(u_new) - n) + n)  # as u_dev + neutral
+        return self._out(st, inp, (self._blended(u_new) - n) + n)  # as u_dev + neutral
 
     def _apply_pending(self) -> None:
         params, ref, new_alg = self._pending  # a fresh instance: no shared state

@@ -23,6 +23,14 @@ joint names ``linear``/``rotary``, each controller its own joint; times from
 sample on (:func:`~pneu_control.controller.trajectory.joint_reference`, the
 in-process task runner's reference, with the same bits: times in integer ns).
 
+The supervisor's word on the axis (:meth:`ControllerShellCore.on_supervisor`: the
+sim's or the driver's ``/diagnostics``, :func:`supervisor_hold` reads them): while
+it holds the valve safe (a latched fault, the e-stop) the controller commands the
+neutral 5 V it holds and feeds that to its observers; released (``~/reset``), it
+restarts from its estimates, bumplessly from 5 V (``AxisController.hold``). A
+controller restarted while its axis is latched so rejoins without a jump, after the
+operator's acknowledge only (the supervisor's latch).
+
 Hosted (one-process) deployments call :meth:`update` and :meth:`answer` with
 a whole sample instead of step 1. Same sample, same numbers: a lockstep ROS
 run gives the in-process runner's results.
@@ -31,6 +39,7 @@ run gives the in-process runner's results.
 from __future__ import annotations
 
 import math
+import re
 import threading
 from typing import Any
 
@@ -43,7 +52,13 @@ from pneu_msgs_py.params.core import ParamError
 from pneu_control.controller.axis import STATE_FIELDS, AxisController
 from pneu_control.controller.trajectory import from_stamped, joint_reference
 
-__all__ = ["INPUT_TOPICS", "SampleAssembler", "TickDecoder", "ControllerShellCore"]
+__all__ = [
+    "INPUT_TOPICS",
+    "SampleAssembler",
+    "TickDecoder",
+    "ControllerShellCore",
+    "supervisor_hold",
+]
 
 _P = tuple(PRESSURE_TOPICS)
 #: The sensor topics each axis' controller takes (its algorithms read nothing else).
@@ -52,6 +67,39 @@ INPUT_TOPICS: dict[str, tuple[str, ...]] = {
     "rotary": (JOINT_STATE_TOPIC["rotary"],),
 }
 _NAN = math.nan
+# the sim's and the driver's safety statuses (pneu_sim.nodes.sim_core.safety_statuses, the
+# driver node): "<node>: safety <axis>" (1 Hz: state, causes) or "<node>: safety <axis> <rule>"
+# (a transition, stamped with its sample); axis "all" for the e-stop and the reset
+_SAFETY_STATUS = re.compile(r"^(?:pneu_sim|pneu_driver): safety (linear|rotary|all)(?: (\S+))?$")
+_NOT_HELD = ("no_command", "no_sample")  # causes of a SAFE axis that hold nothing latched
+
+
+def supervisor_hold(statuses: Any, axis: str) -> str | None:
+    """What the sim's or the driver's ``/diagnostics`` statuses say about ``axis``' valve:
+    why the supervisor holds it safe (the latched causes or the rule that tripped, e.g.
+    ``watchdog``, ``estop``), ``""`` released, None when they say nothing about it.
+
+    A latch is an ERROR transition of the axis (or of ``all``: the e-stop); a release the
+    ``reset`` (or this axis' ``acknowledge`` with no e-stop left); the 1 Hz status says
+    either (SAFE with latched causes; waiting for a first command holds nothing)."""
+    out = None
+    for st in statuses:
+        m = _SAFETY_STATUS.match(st.name)
+        if m is None or m.group(1) not in (axis, "all"):
+            continue
+        rule = m.group(2)
+        if rule is None:
+            if m.group(1) == axis:
+                causes = [c for c in st.values.get("causes", "").split(",") if c]
+                causes = [c for c in causes if c not in _NOT_HELD]
+                out = ",".join(causes) if st.message == "SAFE" and causes else ""
+        elif st.level == 2:
+            out = rule
+        elif st.level == 0 and (
+            rule == "reset" or (rule == "acknowledge" and "e-stop still" not in st.message)
+        ):
+            out = ""
+    return out
 
 
 class SampleAssembler:
@@ -162,6 +210,8 @@ class ControllerShellCore:
         self.n_trajectories_refused = 0
         self.n_trajectories_late = 0  # started before the sample that took it (joined mid-way)
         self.trajectory_error = ""
+        self.held_by = ""  # why the supervisor holds the valve safe ("" = it does not)
+        self._hold_request: str | None = None  # from another thread, applied at the next sample
 
     @property
     def params(self) -> Any:
@@ -227,8 +277,27 @@ class ControllerShellCore:
         c.set_reference(joint_reference(traj, self.axis), start_s=traj.t_start)
         self.n_trajectories += 1
 
+    def on_supervisor(self, statuses: Any) -> str | None:
+        """The sim's or driver's ``/diagnostics`` statuses (any thread): a line when they
+        hold or release this axis (applied at the next sample), else None."""
+        why = supervisor_hold(statuses, self.axis)
+        if why is None or (why != "") == (self.held_by != ""):
+            return None
+        self.held_by = why
+        self._hold_request = why
+        u0 = self.params.limits.u_neutral
+        if why:
+            return (
+                f"{self.axis}: valve held safe by the supervisor ({why}); commanding {u0:g} V "
+                "until it is released (~/reset)"
+            )
+        return f"{self.axis}: released by the supervisor; rejoining bumplessly from {u0:g} V"
+
     def update(self, sample: SensorSample) -> float:
         """``AxisController.update``; returns the valve command (V)."""
+        if self._hold_request is not None:
+            why, self._hold_request = self._hold_request, None
+            self.controller.hold(self.params.limits.u_neutral if why else None)
         if self._trajectory is not None:
             self._take_trajectory(sample)
         u = self.controller.update(sample)
@@ -270,6 +339,12 @@ class ControllerShellCore:
         refused = self.n_trajectories_refused
         level = 1 if (a.incomplete or a.late or nonfinite or self.n_bad or refused) else 0
         msg = "running" if self.n_samples else "waiting for samples"
+        if self.held_by and not level:
+            level = 1
+            msg = (
+                f"valve held safe by the supervisor ({self.held_by}): commanding "
+                f"{self.params.limits.u_neutral:g} V until released"
+            )
         # samples before, none since the last report (1 s): the driver or sim stopped or is gone
         stopped = self.n_samples and self.n_samples == self._samples_seen
         self._samples_seen = self.n_samples
@@ -302,6 +377,8 @@ class ControllerShellCore:
                     "last_stamp_ns": str(self.last_stamp_ns),
                     "last_command_v": f"{self.last_u:.6g}",
                     "parameter_changes": str(self.param_changes),
+                    "held_by_supervisor": self.held_by,
+                    "rejoins": str(self.controller.n_rejoins),
                     "trajectories": str(self.n_trajectories),
                     "trajectories_refused": str(refused),
                     "trajectories_late": str(self.n_trajectories_late),

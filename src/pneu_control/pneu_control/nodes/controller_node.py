@@ -15,6 +15,12 @@ come from ``controllers_file`` (config/controllers.yaml), ROS overrides win.
 A change is validated as one set before rclpy stores it (on-set callback),
 applied after (post-set), and takes effect at the next sample, bumplessly.
 
+Realtime: the node listens to ``/diagnostics`` for the supervisor's word on its axis
+(the sim's or the driver's safety statuses): while the valve is held safe it commands
+the held 5 V, released it rejoins bumplessly (one log line each way; see
+:meth:`~pneu_control.nodes.controller_core.ControllerShellCore.on_supervisor`). Lockstep
+runs keep the in-process runner's semantics (deterministic: no such feedback).
+
 ``hosted=True`` (the one-process deployment, :mod:`.controller_manager`):
 no sensor subscriptions; the host's 1 kHz loop calls :meth:`ControllerNode.compute`
 with each sample and the node publishes the command and state for monitoring,
@@ -26,7 +32,11 @@ from __future__ import annotations
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from pneu_msgs_py.contract.convert import fill_diagnostic_array, joint_trajectory_from_msg
+from pneu_msgs_py.contract.convert import (
+    diag_statuses_from_msg,
+    fill_diagnostic_array,
+    joint_trajectory_from_msg,
+)
 from pneu_msgs_py.contract.qos import DIAGNOSTICS, to_rclpy
 from pneu_msgs_py.contract.samples import SensorSample
 from pneu_msgs_py.contract.topics import (
@@ -159,6 +169,10 @@ class ControllerNode(ShellDefaults, Node):
             self._on_trajectory,
             to_rclpy(sub_qos_for(TRAJECTORY_TOPIC, mode), rq),
         )
+        if mode == "realtime":  # the supervisor's holds and releases of this axis
+            self.create_subscription(
+                DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diagnostics, to_rclpy(DIAGNOSTICS, rq)
+            )
         for topic in () if hosted else self.core.topics:
             # raw=True: the callback gets the CDR bytes; one argument (rclpy 7.1.9's
             # EventsExecutor fails on callbacks that also take a MessageInfo)
@@ -185,6 +199,11 @@ class ControllerNode(ShellDefaults, Node):
         except ParamError as err:
             self.get_logger().warning(f"{self.axis}: trajectory refused: {err}")
 
+    def _on_diagnostics(self, msg) -> None:
+        line = self.core.on_supervisor(diag_statuses_from_msg(msg))
+        if line is not None:
+            self.get_logger().warning(line)
+
     def compute(self, s: SensorSample) -> float:
         """Hosted mode: the host's loop hands over sample ``s``; returns u (V) and publishes
         the command and state (monitoring and bags)."""
@@ -206,7 +225,8 @@ class ControllerNode(ShellDefaults, Node):
         return out
 
     def _validate(self, params: list[Parameter]) -> SetParametersResult:
-        ok, reason, new = validate_updates(self.params, [(p.name, p.value) for p in params])
+        changes = [(p.name, p.value) for p in params]
+        ok, reason, new = validate_updates(self.params, changes)
         if ok and new is not self.params:
             try:  # the core's own checks (reference and waypoint file, axis rules)
                 AxisController(self.axis, new)
@@ -214,10 +234,19 @@ class ControllerNode(ShellDefaults, Node):
                 ok, reason = False, str(err)
         if not ok:
             self.get_logger().warning(f"parameter change refused: {reason}")
+        # validated once: the post-set callback applies this set (milliseconds of Python on
+        # the thread that also answers the samples, in the separate-process deployment)
+        self._validated = (self.params, changes, new) if ok else None
         return SetParametersResult(successful=ok, reason=reason)
 
     def _apply(self, params: list[Parameter]) -> None:
-        ok, _, new = validate_updates(self.params, [(p.name, p.value) for p in params])
+        changes = [(p.name, p.value) for p in params]
+        done = getattr(self, "_validated", None)
+        self._validated = None
+        if done is not None and done[0] is self.params and done[1] == changes:
+            ok, new = True, done[2]
+        else:
+            ok, _, new = validate_updates(self.params, changes)
         if ok and new is not self.params:
             self.params = new
             self.core.set_params(new)  # takes effect at the next sample

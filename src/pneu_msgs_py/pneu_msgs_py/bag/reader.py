@@ -74,15 +74,19 @@ def bag_files(path: str | os.PathLike) -> tuple[list[Path], list[str]]:
     """The MCAP files of a path: itself, or a rosbag2 directory's ``relative_file_paths``.
 
     A run directory (``out`` of a launch or of ``pneu run``) stands for its bag:
-    ``run.mcap``, or the rosbag2 directory ``bag``.
+    ``run.mcap``, or the rosbag2 directory ``bag`` -- also one whose recorder was killed
+    before it wrote ``metadata.yaml`` (its ``.mcap`` files read, with a note).
     """
     p = Path(path)
     warn: list[str] = []
     if p.is_dir() and not (p / "metadata.yaml").is_file():
         if (p / "run.mcap").is_file():
             return [p / "run.mcap"], warn
-        if (p / "bag" / "metadata.yaml").is_file():
-            p = p / "bag"
+        inner = p / "bag"
+        if (inner / "metadata.yaml").is_file() or (
+            not any(p.glob("*.mcap")) and inner.is_dir() and any(inner.glob("*.mcap"))
+        ):
+            p = inner
     if p.is_dir():
         meta = p / "metadata.yaml"
         if meta.is_file():

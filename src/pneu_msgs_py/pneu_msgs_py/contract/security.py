@@ -112,8 +112,8 @@ def _row(t: TopicSpec) -> tuple[tuple[str, ...], tuple[str, ...]]:
         )
     if t.kind == "task_progress":
         return ("task_runner",), ("io", "controller_manager", *_READERS)
-    if t.kind == "diagnostics":
-        return (*ROLES, "operator"), ("task_runner", "operator", *_READERS)
+    if t.kind == "diagnostics":  # the controllers read the supervisor's holds of their axis
+        return (*ROLES, "operator"), (*ctl, "operator", *_READERS)
     if t.kind == "clock":
         return ("io", "controller_manager"), (*ROLES, "operator")
     raise KeyError(f"topic {t.name}: kind {t.kind!r} has no permissions row")

@@ -14,7 +14,11 @@ imports pneu_control, DESIGN §2):
   overrides from the topic table, into ``<out>/bag``; the logger node adds the
   run metadata beside it) or ``recorder:=pneu`` (the logger node writes
   ``<out>/run.mcap`` itself); ``auto`` = pneu in lockstep, rosbag2 in realtime;
-- ``executor:=events|single|auto`` for every node (default: each node's own).
+- ``executor:=events|single|auto`` for every node (default: each node's own);
+- the run ends with the process on the I/O side (the sim, the driver, the hosted
+  manager) and with any recording process (``ros2 bag record``, the logger): a run whose
+  record stopped is stopped, not left moving unrecorded (:func:`exit_action`: one line
+  says which process ended, how, and what it means; the others then stop cleanly).
 """
 
 from __future__ import annotations
@@ -31,6 +35,9 @@ __all__ = [
     "controller_node",
     "controller_and_logger_nodes",
     "controller_overrides",
+    "exit_action",
+    "io_exit",
+    "IO_SIGTERM_TIMEOUT",
     "hosted_manager",
     "recorder_choice",
     "rosbag2_qos_overrides",
@@ -188,10 +195,58 @@ def controller_node(axis: str, parameters: list) -> Any:
     )
 
 
+def exit_action(process: str, finished: str | None, meaning: str = "") -> Callable:
+    """``on_exit`` of a process whose end ends the run: the launch shuts down -- with reason
+    ``finished`` on a clean exit (None: any exit of ``process`` stops the run); after a crash
+    or a kill (a non-zero exit code, a signal) one ERROR line first: which process, how it
+    ended, ``meaning`` (what that leaves behind). Nothing while the launch is already
+    shutting down (Ctrl-C, the run's end)."""
+
+    def on_exit(event: Any, context: Any) -> list | None:
+        from launch.actions import Shutdown
+        from launch.logging import get_logger
+
+        if context.is_shutdown:
+            return None
+        rc = event.returncode
+        if rc == 0:
+            return [Shutdown(reason=finished or f"{process} stopped")]
+        how = f"killed by signal {-rc}" if rc is not None and rc < 0 else f"exit code {rc}"
+        line = f"{process} ended ({how}) before the run did: run stopped" + (
+            f"; {meaning}" if meaning else ""
+        )
+        get_logger("launch").error(line)
+        return [Shutdown(reason=line)]
+
+    return on_exit
+
+
+#: what a killed I/O process leaves behind (:func:`exit_action`'s ``meaning``)
+SIM_DIED = "the twin is gone: the controllers get no samples and command nothing"
+DRIVER_DIED = (
+    "the DAQ loop is gone: the card keeps driving its last outputs and the heartbeat "
+    "stopped (the watchdog relay drops the air: docs/rig.md)"
+)
+
+
+#: SIGINT -> SIGTERM of the processes that hold many reliable writers (the sim, the driver,
+#: the hosted manager): a recorder killed earlier stays matched until its DDS lease ends, and
+#: rmw_cyclonedds lingers 1 s per writer on deletion for its unacknowledged samples --
+#: measured 5-7 s for the sim's shutdown after a SIGKILLed ``ros2 bag record`` (its loop,
+#: and the valves, stopped first); launch's default 5 s then escalated to SIGTERM.
+IO_SIGTERM_TIMEOUT = "20"
+
+
+def io_exit(target: str) -> Callable:
+    """``on_exit`` of the I/O side of ``target`` (sim or rig): its end ends the run."""
+    if target == "sim":
+        return exit_action("pneu_sim", "simulation finished", SIM_DIED)
+    return exit_action("pneu_driver", "driver stopped", DRIVER_DIED)
+
+
 def io_node(target: str, params: dict[str, Any], finished: str = "driver stopped") -> Any:
     """The node on the I/O side, its exit ending the launch: the twin (``target`` sim, the
     ``pneu_sim`` sim node; ``finished`` says why it ended) or the rig (the driver node)."""
-    from launch.actions import Shutdown
     from launch_ros.actions import Node
 
     sim = target == "sim"
@@ -201,7 +256,12 @@ def io_node(target: str, params: dict[str, Any], finished: str = "driver stopped
         name="pneu_sim" if sim else "pneu_driver",
         output="screen",
         parameters=[params],
-        on_exit=[Shutdown(reason=finished if sim else "driver stopped")],
+        sigterm_timeout=IO_SIGTERM_TIMEOUT,
+        on_exit=exit_action(
+            "pneu_sim" if sim else "pneu_driver",
+            finished if sim else "driver stopped",
+            SIM_DIED if sim else DRIVER_DIED,
+        ),
     )
 
 
@@ -226,6 +286,13 @@ def logger_node(out: str, mode: str, recorder: str = "pneu", extra: dict | None 
             }
         ],
         sigterm_timeout="15",  # the run's metadata is written at shutdown
+        on_exit=exit_action(
+            "logger",
+            None,
+            f"what it recorded is in {out}/run.mcap.partial (pneu recover)"
+            if recorder == "pneu"
+            else "the run's metadata (pneu_metadata.json) is lost",
+        ),
     )
 
 
@@ -262,6 +329,7 @@ def hosted_manager(
         executable="controller_manager",
         output="screen",
         parameters=[f"{config_dir}/{GAIN_FILES[arg['gains']]}", path],
+        sigterm_timeout=IO_SIGTERM_TIMEOUT,
         **node_kwargs,
     )
 
@@ -310,6 +378,12 @@ def rosbag2_recorder(out: str, mode: str) -> Any:
         output="screen",
         sigterm_timeout="20",  # flush the cache and write the summary before any SIGKILL
         sigkill_timeout="10",
+        on_exit=exit_action(
+            "recorder (ros2 bag record)",
+            None,
+            f"what it wrote is in {os.path.join(out, 'bag')} (no metadata.yaml: ros2 bag "
+            "reindex, or pneu recover on its .mcap)",
+        ),
     )
 
 

@@ -12,8 +12,12 @@ the Jazzy shape (ros2/demos ``talker.py``) plus what a rig needs:
    ``executor`` parameter if it declares one, else the environment variable
    ``PNEU_EXECUTOR``, else the node's default;
 3. ``node.start()``, then spin until ``node.done`` (a Future, or forever when
-   None), Ctrl-C (KeyboardInterrupt) or an external shutdown (SIGTERM) -- in
-   slices of :data:`SPIN_SLICE_S`, so that a signal is always seen;
+   None), Ctrl-C or an external shutdown (SIGTERM) -- in slices of
+   :data:`SPIN_SLICE_S`, so that a signal is always seen. Once spinning, a SIGINT
+   only asks the spin to end (:class:`_StopRequest`): Python's own handler raised
+   KeyboardInterrupt wherever the main thread was, most often inside a sample's
+   callback at 1 kHz, which the EventsExecutor reported as a FATAL "Exception in
+   'subscriptions' callback" with a stack on every Ctrl-C;
 4. always: the executor is shut down (EventsExecutor must stop before its
    nodes go), ``node.safe_shutdown()`` leaves the rig safe and files complete
    -- with a second SIGINT ignored meanwhile (under ``ros2 launch`` a Ctrl-C
@@ -164,6 +168,28 @@ def _before_init(name: str, args: list[str] | None) -> None:
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 
+class _StopRequest:
+    """SIGINT while spinning: remembered (``bool(self)``), never raised into a callback; the
+    spin loop sees it within :data:`SPIN_SLICE_S`. Restores the previous handler on exit."""
+
+    def __init__(self) -> None:
+        self.signum = 0
+        try:
+            self.previous = signal.signal(signal.SIGINT, self._on_signal)
+        except ValueError:  # not the main thread: signals are not ours to handle
+            self.previous = None
+            self.restore = lambda: None
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self.signum = signum
+
+    def __bool__(self) -> bool:
+        return bool(self.signum)
+
+    def restore(self) -> None:
+        signal.signal(signal.SIGINT, self.previous or signal.default_int_handler)
+
+
 def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | None = None) -> int:
     """Run one node to the end (see the module docstring); returns the exit status."""
     import rclpy
@@ -197,8 +223,12 @@ def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | No
         # always end the spin (measured on rclpy 7.1.9: an EventsExecutor that only has slow
         # timers sometimes sat out a SIGINT until launch escalated to SIGTERM).
         done = node.done if node.done is not None else Future()
-        while rclpy.ok() and not done.done():
-            executor.spin_until_future_complete(done, timeout_sec=SPIN_SLICE_S)
+        stop = _StopRequest()
+        try:
+            while rclpy.ok() and not done.done() and not stop:
+                executor.spin_until_future_complete(done, timeout_sec=SPIN_SLICE_S)
+        finally:
+            stop.restore()
         code = node.exit_code()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
