@@ -71,8 +71,9 @@ def test_a_restarted_controller_rejoins_bumplessly_only_after_the_reset(reset_at
     u, core = _run(reset_at, feedback=True)
     steps = np.abs(np.diff(u))
     normal = steps[100:KILL].max()  # the controller's own largest step per tick, running
-    trip = KILL + 1 + np.argmax(u[KILL:] == 5.0)  # the watchdog's hold
-    assert trip - KILL <= 7  # watchdog_ms 5 (+ the one-sample delay)
+    hold_ms = load_safety_params(None).late_hold_ms
+    trip = KILL + 1 + np.argmax(u[KILL:] == 5.0)  # the late command's hold ends: 5 V
+    assert trip - KILL <= hold_ms + 2  # late_hold_ms (+ the one-sample delay), then latched
     assert np.all(u[trip:reset_at] == 5.0)  # held until the operator's reset
     moved = reset_at + np.argmax(u[reset_at:] != 5.0)  # the controller's first own command
     assert moved <= reset_at + LATENCY + 2
