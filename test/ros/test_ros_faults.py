@@ -778,7 +778,7 @@ def test_a_second_rig_on_the_same_card_is_refused_and_never_writes_it(
     data = read_run(tmp_path / "a" / "bag")
     twice = {}
     for axis in ("linear", "rotary"):
-        stamps, n = np.unique(data[f"/pneu/{axis}/valve_command"].stamp_ns, return_counts=True)
+        _, n = np.unique(data[f"/pneu/{axis}/valve_command"].stamp_ns, return_counts=True)
         twice[axis] = int((n[:-1] > 1).sum())  # (the last: the controllers' neutral last word)
     if deployment == "hosted":  # B's controllers live in B's manager: they never saw A's samples
         assert twice == {"linear": 0, "rotary": 0}, twice
