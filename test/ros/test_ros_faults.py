@@ -11,15 +11,17 @@ this test reads with a node of its own (the sim's clock in its 1 Hz status, the
 supervisor's transitions stamped with their sample). What happened is then read from
 the bag the graph recorded, and from the simulated card for the rig.
 
-1. A controller process SIGKILLed mid-run (``deployment:=nodes``): its axis is held safe
-   by the supervisor's command watchdog within ``watchdog_ms`` (+ the tick that sees
-   it) of its last command, the other axis goes on, ``/diagnostics`` in the bag says
-   so; a controller restarted with ``ros2 run`` while the axis is latched commands
-   nothing the valve takes until the operator's ``~/reset``, then rejoins without a
-   jump: its first own command within twice the controller's own p99 step of the held
-   5 V (a wound-up controller puts 1.5-5 V there: test/control/nodes/test_supervisor_hold.py). Hosted, the controllers are threads of the sim's process: killing "a
-   controller process" is killing the sim (case 3). Its analogue there is the
-   operator's e-stop and reset: both axes held, then both rejoin without a jump.
+1. A controller process SIGKILLed mid-run (``deployment:=nodes``): the supervisor holds
+   its last command ``late_hold_ms``, then its valve at 5 V, and latches the axis within
+   ``watchdog_ms`` (+ the tick that sees it) of its last command; the other axis goes
+   on, ``/diagnostics`` in the bag says so. A controller restarted with ``ros2 run``
+   while the axis is latched commands nothing the valve takes until the operator's
+   ``~/reset``, then rejoins without a jump: its first own command within twice the
+   controller's own p99 step of the held 5 V (a wound-up controller puts 1.5-5 V
+   there: test/control/nodes/test_supervisor_hold.py). Hosted, the controllers are
+   threads of the sim's process: killing "a controller process" is killing the sim
+   (case 3). Its analogue there is the operator's e-stop and reset: both axes held,
+   then both rejoin without a jump.
 2. The recorder SIGKILLed (rosbag2 in realtime, the pneu logger in lockstep): the run
    stops (the launch says which process ended and how; every other process ends
    cleanly); what was recorded reads back -- rosbag2's ``bag_0.mcap`` without its
