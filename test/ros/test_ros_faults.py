@@ -11,15 +11,17 @@ this test reads with a node of its own (the sim's clock in its 1 Hz status, the
 supervisor's transitions stamped with their sample). What happened is then read from
 the bag the graph recorded, and from the simulated card for the rig.
 
-1. A controller process SIGKILLed mid-run (``deployment:=nodes``): its axis is held safe
-   by the supervisor's command watchdog within ``watchdog_ms`` (+ the tick that sees
-   it) of its last command, the other axis goes on, ``/diagnostics`` in the bag says
-   so; a controller restarted with ``ros2 run`` while the axis is latched commands
-   nothing the valve takes until the operator's ``~/reset``, then rejoins without a
-   jump (its first own command within one of the controller's own steps of the held
-   5 V). Hosted, the controllers are threads of the sim's process: killing "a
-   controller process" is killing the sim (case 3). Its analogue there is the
-   operator's e-stop and reset: both axes held, then both rejoin without a jump.
+1. A controller process SIGKILLed mid-run (``deployment:=nodes``): the supervisor holds
+   its last command ``late_hold_ms``, then its valve at 5 V, and latches the axis within
+   ``watchdog_ms`` (+ the tick that sees it) of its last command; the other axis goes
+   on, ``/diagnostics`` in the bag says so. A controller restarted with ``ros2 run``
+   while the axis is latched commands nothing the valve takes until the operator's
+   ``~/reset``, then rejoins without a jump: its first own command within twice the
+   controller's own p99 step of the held 5 V (a wound-up controller puts 1.5-5 V
+   there: test/control/nodes/test_supervisor_hold.py). Hosted, the controllers are
+   threads of the sim's process: killing "a controller process" is killing the sim
+   (case 3). Its analogue there is the operator's e-stop and reset: both axes held,
+   then both rejoin without a jump.
 2. The recorder SIGKILLed (rosbag2 in realtime, the pneu logger in lockstep): the run
    stops (the launch says which process ended and how; every other process ends
    cleanly); what was recorded reads back -- rosbag2's ``bag_0.mcap`` without its
@@ -372,6 +374,15 @@ def test_a_killed_controller_is_held_safe_and_a_restarted_one_rejoins_after_rese
     )  # fmt: skip
     g.wait_line(rf"\[linear_controller-\d+\]: process has died \[pid {linear_pid}, exit code -9")
     i, _ = diag.sim_time("pneu_sim", trip[0] * 1e-9 + 2.0, after=i)  # the rotary axis goes on
+    with diag.cv:  # the late commands' hold (late_policy): from before the kill to now
+        sims = [
+            (j, r[4]) for j, r in enumerate(diag.items[: i + 1]) if r[2] == "pneu_sim: lockstep"
+        ]
+    before = [v for j, v in sims if j < mark][-1]
+    late = {
+        k: int(sims[-1][1].get(f"linear.{k}", 0)) - int(before.get(f"linear.{k}", 0))
+        for k in ("late_ticks", "held_ticks")
+    }
     restarted = Proc(
         [*PRIO, "ros2", "run", "pneu_control", "linear_controller", "--ros-args",
          "--params-file", str(GAINS), "-p", "mode:=realtime"],
@@ -421,7 +432,7 @@ def test_a_killed_controller_is_held_safe_and_a_restarted_one_rejoins_after_rese
     # the rejoin: its first own command after the reset within one of its own steps of 5 V
     run = (stamp > last - 1000 * T_NS) & (stamp <= last)  # its last second: no latch in it
     steps = np.abs(np.diff(u[run]))
-    normal = float(steps.max())
+    normal = 2.0 * float(np.percentile(steps, 99))  # its own steps (p99), twice
     later = np.flatnonzero((stamp > reset[0]) & (u != 5.0))
     assert len(later), "no command of the restarted controller after the reset"
     first = later[0]
@@ -432,9 +443,10 @@ def test_a_killed_controller_is_held_safe_and_a_restarted_one_rejoins_after_rese
         to_safe_ms=to_safe_ns / 1e6,
         rotary_commands_after=f"{len(after_kill)}/{span}",
         rejoin_jump_v=round(jump, 4),
-        own_max_step_v=round(normal, 4),
+        own_step_bound_v=round(normal, 4),
         rejoin_after_reset_ms=(int(stamp[first]) - reset[0]) / 1e6,
         rotary_load_trips=len(rotary_latches),
+        linear_ticks_around_the_kill=late,
     )
 
 
@@ -465,14 +477,14 @@ def test_hosted_estop_and_reset_hold_both_axes_and_they_rejoin_without_a_jump(
         cmd = data[f"/pneu/{axis}/valve_command"]
         stamp, u = cmd.stamp_ns, cmd["effort"]
         steps = np.abs(np.diff(u[(stamp > stop[0] - 1000 * T_NS) & (stamp < stop[0])]))
-        normal = float(steps.max())
+        normal = 2.0 * float(np.percentile(steps, 99))  # its own steps (p99), twice
         held = u[(stamp > stop[0] + 200 * T_NS) & (stamp <= reset[0])]
         assert len(held) and np.all(held == 5.0), (axis, held[held != 5.0][:10])
         later = np.flatnonzero((stamp > reset[0]) & (u != 5.0))
         jump = abs(float(u[later[0]]) - 5.0)
         assert jump <= normal, (axis, jump, normal)
         figures[f"{axis}_jump_v"] = round(jump, 4)
-        figures[f"{axis}_own_max_step_v"] = round(normal, 4)
+        figures[f"{axis}_own_step_bound_v"] = round(normal, 4)
     _report(f"hosted e-stop + reset ({executor})", **figures)
 
 
@@ -769,7 +781,7 @@ def test_a_second_rig_on_the_same_card_is_refused_and_never_writes_it(
     twice = {}
     for axis in ("linear", "rotary"):
         _, n = np.unique(data[f"/pneu/{axis}/valve_command"].stamp_ns, return_counts=True)
-        twice[axis] = int((n > 1).sum())
+        twice[axis] = int((n[:-1] > 1).sum())  # (the last: the controllers' neutral last word)
     if deployment == "hosted":  # B's controllers live in B's manager: they never saw A's samples
         assert twice == {"linear": 0, "rotary": 0}, twice
     _report(

@@ -147,6 +147,29 @@ def test_a_damaged_message_index_costs_nothing(bag, tmp_path):
     np.testing.assert_array_equal(d[P1]["fluid_pressure"], whole[P1]["fluid_pressure"])
 
 
+@pytest.mark.parametrize("whole_indexes", [0, 1, 3])
+def test_a_cut_in_the_message_indexes_after_a_chunk_keeps_that_whole_chunk(
+    bag, tmp_path, whole_indexes
+):
+    """``ros2 bag record`` SIGKILLed: the file ends inside the message index records that
+    follow its last complete chunk (after ``whole_indexes`` of them). That chunk is read
+    whole (by walking its CRC-checked records), not only the channels whose index records
+    were complete."""
+    chunks = chunks_of(bag)
+    start, length, _ = chunks[2]
+    data = bag.read_bytes()
+    end = start + length
+    for _ in range(whole_indexes):  # op (1) + length (8) + body
+        end += 9 + int.from_bytes(data[end + 1 : end + 9], "little")
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: end + 12])
+    with pytest.warns(UserWarning, match="truncated"):
+        d = read_run(cut)
+    assert d.message_count == sum(sum(c.values()) for _, _, c in chunks[:3])
+    rep = recover(cut, tmp_path / "fixed.mcap")
+    assert rep.messages == d.message_count == independent_count(tmp_path / "fixed.mcap")
+
+
 @pytest.mark.parametrize("fraction", [0.1, 0.37, 0.62, 0.95])
 def test_a_cut_bag_reads_its_complete_chunks_and_recovers(bag, tmp_path, fraction):
     data = bag.read_bytes()

@@ -394,6 +394,10 @@ class McapFile:
             op, length = _REC.unpack(head)
             if length > self.size - pos - 9 or not 0x01 <= op <= 0x10:
                 if pending is not None:
+                    # its message indexes end here, some perhaps not read (a file cut inside
+                    # them: a SIGKILLed ros2 bag record): walk its records instead
+                    if not pending.problem:
+                        pending.offsets = None
                     yield pending
                     pending = None
                 nxt, ended = self._skip_unreadable(pos, op, length)
