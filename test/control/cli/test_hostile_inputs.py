@@ -919,6 +919,12 @@ def test_an_unknown_argument_is_refused_by_its_subcommand(tmp_path, argv, allowe
     assert not (tmp_path / "o").exists()
 
 
+def test_an_unknown_no_option_is_not_offered_its_opposite(tmp_path):
+    line = refused("excite", "--axis", "linear", "--no-safety", "--out", tmp_path / "o",
+                   field="unrecognized arguments: --no-safety")  # fmt: skip
+    assert "did you mean --safety" not in line  # the opposite of what was asked
+
+
 def test_a_closed_stdout_pipe_keeps_the_exit_code(tmp_path):
     """``pneu run ... | head -0``: the reader gone, the run still finishes its files and exits
     with its own code (3: the supervisor acted), not 0 (a BrokenPipeError took the code)."""

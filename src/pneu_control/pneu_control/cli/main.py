@@ -134,7 +134,8 @@ def _close_option(extras: list[str], parser: argparse.ArgumentParser) -> str:
         word = re.sub(r"^[\u2010-\u2015\u2212-]+", "--", text.split("=", 1)[0])
         close = difflib.get_close_matches(word, known, n=1, cutoff=0.7)
         given = text.split("=", 1)[0]
-        if word.startswith("--") and close and given not in known:  # not one put after '--'
+        opposite = close and close[0] == "--" + word.removeprefix("--no-")  # --no-X is not --X
+        if word.startswith("--") and close and given not in known and not opposite:
             return f"; did you mean {close[0]}?"
     return ""
 

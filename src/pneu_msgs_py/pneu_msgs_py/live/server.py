@@ -59,7 +59,7 @@ def _foxglove() -> Any:
 def _bind_refusal(host: str, port: int, err: Exception) -> str:
     """One line naming the option the server could not start on: the port (in use, not
     allowed) or the host (no such name, not an address of this machine)."""
-    text = str(err).removeprefix("Failed to bind port: ")
+    text = str(err).split("Failed to bind port: ", 1)[-1]  # foxglove's own words, once
     if "in use" in text or "ermission denied" in text:
         hint = "; --live 0 picks a free port" if port else ""
         return f"--live: {port} refused; allowed: a port free to serve on ({text}){hint}"
