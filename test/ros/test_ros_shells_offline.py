@@ -312,6 +312,8 @@ def test_ctrl_c_while_spinning_ends_the_spin_without_raising_into_a_callback(wor
     world.overrides["/pneu_sim"] = {"mode": "lockstep", "axes": "none", "duration_s": 0.0}
     import pneu_sim.nodes.sim_node as sn
 
+    # Python's own handler to start from, whatever an earlier test of this process left
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
     shut, ran = [], []
 
     def watch(self):  # a callback the signal lands in: it runs to its end
@@ -322,7 +324,10 @@ def test_ctrl_c_while_spinning_ends_the_spin_without_raising_into_a_callback(wor
     monkeypatch.setattr(sn.SimNode, "safe_shutdown", lambda self: shut.append(True))
     assert sn.main() == 0
     assert ran[:1] == [49_995_000] and shut == [True]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+    try:
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+    finally:
+        signal.signal(signal.SIGINT, before)
 
 
 @pytest.mark.parametrize(
