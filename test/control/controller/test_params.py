@@ -109,8 +109,6 @@ def test_yaml_is_a_ros2_params_file_with_floats_as_floats():
         ({"eso_smc.omega_0": 4000.0}, "eso_smc.omega_0", r"\(0, 3141.59\] rad/s"),
         ({"ladrc.omega_0": 3200.0}, "ladrc.omega_0", r"\(0, 3141.59\] rad/s"),
         ({"td.h": 0.0005}, "td.h", r"\[0.001, inf\) s"),
-        ({"eso_smc.k": 20.0}, "eso_smc.k", r"\(0, 1/Δ = 10\]"),
-        ({"eso_smc.k": 10.0}, "eso_smc.k", r"ε·k·T < 1"),
         ({"pid.anti_windup": "clamp"}, "pid.anti_windup", "conditional, back_calculation, none"),
     ],
 )
@@ -122,6 +120,22 @@ def test_bad_values_refused_naming_key_value_and_range(override, key, allowed):
     assert str(err.value).startswith(f"{key}: {next(iter(override.values()))!r} refused")
     with pytest.raises(ParamError, match=allowed):  # the loader path refuses the same way
         load_controller_params("linear", CONFIG, override)
+
+
+@pytest.mark.parametrize(
+    "override, key, allowed",
+    [
+        ({"eso_smc.k": 20.0}, "eso_smc.k/eso_smc.delta", r"k in \(0, 10\] at Δ = 0.1, or Δ in"),
+        ({"eso_smc.k": 10.0}, "eso_smc.epsilon/eso_smc.k", r"ε·k·T < 1 .*: k in \(0, 0.833333\)"),
+        # ε set, k as the file has it: the line names ε too, and its range at that k
+        ({"eso_smc.epsilon": 2000.0}, "eso_smc.epsilon/eso_smc.k", r"or ε in \(0, 2000\) at k"),
+    ],
+)
+def test_coupled_fields_are_refused_naming_both(override, key, allowed):
+    p = load_controller_params("linear", CONFIG)
+    with pytest.raises(ParamError, match=allowed) as err:
+        with_updates(p, override)
+    assert err.value.key == key
 
 
 def test_sine_zero_frequency_and_step_zero_duration_refused():

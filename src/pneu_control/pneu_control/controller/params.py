@@ -273,34 +273,29 @@ class AxisControllerParams:
             )
         if self.td.h < T * (1.0 - 1e-9):
             raise ParamError("td.h", self.td.h, f"[{T:g}, inf) s (at least the sample time)")
-        if smc.k * smc.delta > 1.0 + 1e-12:
-            raise ParamError(
-                "eso_smc.k",
-                smc.k,
-                f"(0, 1/Δ = {1.0 / smc.delta:g}] (sat must not exceed 1 in the layer)",
-            )
-        gain = smc.epsilon * smc.k * T
-        if gain >= 1.0:
-            raise ParamError(
-                "eso_smc.k",
-                smc.k,
-                f"(0, {1.0 / (smc.epsilon * T):.6g}) so that ε·k·T < 1 (discrete boundary layer "
-                f"stable with a one-sample delay; ε = {smc.epsilon:g}, T = {T:g} s)",
-            )
-        plus = self.eso_smc_plus
-        if plus.k * plus.delta > 1.0 + 1e-12:
-            raise ParamError(
-                "eso_smc_plus.k",
-                plus.k,
-                f"(0, 1/Δ = {1.0 / plus.delta:g}] (sat must not exceed 1 in the layer)",
-            )
-        if plus.epsilon * plus.k * T >= 1.0:
-            raise ParamError(
-                "eso_smc_plus.k",
-                plus.k,
-                f"(0, {1.0 / (plus.epsilon * T):.6g}) so that ε·k·T < 1 (ε = {plus.epsilon:g}, "
-                f"T = {T:g} s)",
-            )
+        for group in ("eso_smc", "eso_smc_plus"):
+            _check_layer(group, getattr(self, group), T)
+
+
+def _check_layer(group: str, smc: Any, T: float) -> None:
+    """The boundary layer of an ESO-SMC group: k·Δ <= 1 and ε·k·T < 1. Each couples two
+    fields: the refusal names both (whichever was set) and the range of each at the other's
+    value."""
+    if smc.k * smc.delta > 1.0 + 1e-12:
+        raise ParamError(
+            f"{group}.k/{group}.delta",
+            f"{smc.k:g}, {smc.delta:g}",
+            f"k·Δ <= 1 (sat must not exceed 1 in the layer): k in (0, {1.0 / smc.delta:.6g}] "
+            f"at Δ = {smc.delta:g}, or Δ in (0, {1.0 / smc.k:.6g}] at k = {smc.k:g}",
+        )
+    if smc.epsilon * smc.k * T >= 1.0:
+        raise ParamError(
+            f"{group}.epsilon/{group}.k",
+            f"{smc.epsilon:g}, {smc.k:g}",
+            f"ε·k·T < 1 (the discrete boundary layer stable with a one-sample delay, T = {T:g} "
+            f"s): k in (0, {1.0 / (smc.epsilon * T):.6g}) at ε = {smc.epsilon:g}, or ε in "
+            f"(0, {1.0 / (smc.k * T):.6g}) at k = {smc.k:g}",
+        )
 
 
 def _find_controllers_yaml() -> Path:
