@@ -79,11 +79,8 @@ WATCHDOG_NS = round(load_safety_params(None).watchdog_ms * 1e6)
 T_NS = 1_000_000
 GAINS = config_file("controllers_retuned.yaml")  # the sim launch's default (gains:=retuned)
 EVENT_S = 120.0  # the longest any event may take to come (start-up on a busy machine)
-# Every process of a graph at SCHED_FIFO 40 where this user may (the sim's loop thread at its
-# rt_priority 50 above them): the way to run a realtime graph on a shared machine
-# (docs/ros2.md); without it the separate-process graph trips its watchdog under other
-# work's load before any fault is injected. Case 4's hosted graph runs without it.
-PRIO = ["chrt", "-f", "40"] if subprocess.run(["chrt", "-f", "40", "true"]).returncode == 0 else []
+# Every graph as launched: its nodes set their own priorities (DESIGN §10; the loop at
+# SCHED_FIFO 50, the rest of its process and the controllers at 49), no chrt by hand.
 
 
 # -- processes ------------------------------------------------------------------------
@@ -174,8 +171,8 @@ def procs():
             p.kill()
 
 
-def _sim(procs, out: Path, *args: str, prio: list[str] = PRIO) -> Proc:
-    cmd = [*prio, "ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py"]
+def _sim(procs, out: Path, *args: str) -> Proc:
+    cmd = ["ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py"]
     p = Proc(
         [*cmd, "mode:=realtime", "duration:=0", f"out:={out}", *args], f"sim launch {out.name}"
     )
@@ -184,7 +181,7 @@ def _sim(procs, out: Path, *args: str, prio: list[str] = PRIO) -> Proc:
 
 
 def _rig(procs, out: Path, card: Path, *args: str) -> Proc:
-    cmd = [*PRIO, "ros2", "launch", "--noninteractive", "pneu_driver", "rig.launch.py"]
+    cmd = ["ros2", "launch", "--noninteractive", "pneu_driver", "rig.launch.py"]
     p = Proc(
         [*cmd, f"backend:=sim:card={card}", "gains:=retuned", f"out:={out}", *args],
         f"rig launch {out.name}",
@@ -384,7 +381,7 @@ def test_a_killed_controller_is_held_safe_and_a_restarted_one_rejoins_after_rese
         for k in ("late_ticks", "held_ticks")
     }
     restarted = Proc(
-        [*PRIO, "ros2", "run", "pneu_control", "linear_controller", "--ros-args",
+        ["ros2", "run", "pneu_control", "linear_controller", "--ros-args",
          "--params-file", str(GAINS), "-p", "mode:=realtime"],
         "restarted linear controller",
     )  # fmt: skip
@@ -539,7 +536,7 @@ def test_a_killed_rosbag2_recorder_stops_the_run_and_its_bag_reads_back(
 
 def test_a_killed_pneu_logger_stops_a_lockstep_run_and_pneu_recover_reads_it(procs, diag, tmp_path):
     out = tmp_path / "run"
-    cmd = [*PRIO, "ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py"]
+    cmd = ["ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py"]
     g = Proc([*cmd, "mode:=lockstep", "duration:=600", f"out:={out}"], "lockstep launch")
     procs.append(g)
     pid = g.pid_of("logger")
@@ -667,11 +664,8 @@ def test_a_parameter_set_under_load_takes_effect_without_a_supervisor_trip(
     busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
     try:
         out = tmp_path / "run"
-        # hosted: as launched (its loop thread at SCHED_FIFO 50, the controllers inside it);
-        # separate processes: each at SCHED_FIFO 40 (PRIO), the documented way beside other
-        # work -- without it two busy processes trip the watchdog on their own (docs/ros2.md)
-        prio = PRIO if deployment == "nodes" else []
-        g = _sim(procs, out, f"deployment:={deployment}", prio=prio)
+        # as launched: the nodes' own priorities (the loop at SCHED_FIFO 50, the rest at 49)
+        g = _sim(procs, out, f"deployment:={deployment}")
         _settle(diag, "pneu_sim", 3.0)
         mark = len(diag.items)
         res = _ros2("param", "set", "/linear_controller", "eso_smc.epsilon", str(new_eps))

@@ -48,6 +48,7 @@ def _setup(arg: dict[str, str]) -> list:
         "safety_file": os.path.join(config, "safety.yaml"),
         "axes": arg["axes"],
         "backend": arg["backend"],
+        "rt_priority": int(arg["rt_priority"]),  # the loop; the process's other threads one below
     }
     exit_action = io_exit("rig")
     if arg["deployment"] == "hosted":

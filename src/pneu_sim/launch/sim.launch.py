@@ -40,13 +40,6 @@ ARGS = [
     ),
     ("duration", "20.0", "simulated seconds, then everything stops (0 = run until Ctrl-C)", None),
     ("seed", "0", "noise seed of the twin", None),
-    (
-        "rt_priority",
-        "50",
-        "realtime: SCHED_FIFO priority of the 1 kHz loop thread, as the rig's loop.rt_priority "
-        "(0 = normal scheduling; without root, CAP_SYS_NICE or an rtprio limit: a warning, normal)",
-        None,
-    ),
     ("out", "out/ros", "directory of the bag (run.mcap)", None),
     (
         "safety",

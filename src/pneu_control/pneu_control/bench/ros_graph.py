@@ -8,9 +8,16 @@ chosen deployment and executor, samples each process's CPU time from
 - ``ticks``: samples the sim's loop stepped; ``missed.<axis>``: ticks without
   a fresh command from that axis' controller when the sim applied the
   commands (a skipped tick -- the loop itself too late -- counts as missed);
-- ``turnaround.<axis>`` p50 / p99 / max: from a sample's publication to the
-  publication of the command answering it, both from the bag's
-  ``publish_time`` (the publishers' source timestamps, one clock);
+- ``turnaround.<axis>`` p50 / p99 / max: from a sample being ready in the loop to the
+  loop taking the command that answers it, measured by the loop itself (the sim's
+  end-of-run counters, every tick): in the separate-process deployment the way there
+  and back over DDS, hosted the controller's computation;
+- ``bag_turnaround.<axis>``: from a sample's publication to the publication of the
+  command answering it, from the bag's ``publish_time`` (the publishers' source
+  timestamps; hosted both are published after the loop took the command: a monitoring
+  figure there);
+- ``dropped_batches``: hosted, ticks whose messages the publishing thread dropped rather
+  than delay the loop (:mod:`pneu_msgs_py.nodes.handoff`);
 - ``late_ticks.<axis>``, ``held_ticks.<axis>``, ``ramped_ticks.<axis>``: the supervisor's
   count of ticks with a late command and of those written held or ramped (its
   ``late_policy``, DESIGN §14);
@@ -138,11 +145,31 @@ def _sim_counters(data) -> dict[str, str]:
 
 
 _BUSY = "while True: pass"
+# memory and I/O pressure: 256 MiB touched page by page, 32 MiB written and fsynced, again
+_PRESSURE = """
+import os, tempfile
+fd, path = tempfile.mkstemp(prefix="pneu_bench_io_")
+block = os.urandom(1 << 20)
+try:
+    while True:
+        buf = bytearray(256 << 20)
+        for i in range(0, len(buf), 4096):
+            buf[i] = 1
+        del buf
+        os.lseek(fd, 0, 0)
+        for _ in range(32):
+            os.write(fd, block)
+        os.fsync(fd)
+finally:
+    os.unlink(path)
+"""
 
 
-def _start_load(n: int) -> list[subprocess.Popen]:
-    """``n`` busy processes at normal priority (one core's worth each), beside the graph."""
-    return [subprocess.Popen([sys.executable, "-c", _BUSY]) for _ in range(n)]
+def _start_load(n: int, io: int = 0) -> list[subprocess.Popen]:
+    """``n`` busy processes and ``io`` memory/IO-pressure processes at normal priority,
+    beside the graph."""
+    busy = [subprocess.Popen([sys.executable, "-c", _BUSY]) for _ in range(n)]
+    return busy + [subprocess.Popen([sys.executable, "-c", _PRESSURE]) for _ in range(io)]
 
 
 def measure(
@@ -152,9 +179,10 @@ def measure(
     out: Path,
     keystore: str = "",
     load: int = 0,
+    io_load: int = 0,
 ) -> dict:
-    """Launch (secured by ``keystore``, beside ``load`` busy processes), sample CPU, read the
-    bag; returns the figures (see the module docstring)."""
+    """Launch (secured by ``keystore``, beside ``load`` busy and ``io_load`` memory/IO
+    processes), sample CPU, read the bag; returns the figures (see the module docstring)."""
     from pneu_msgs_py.bag.reader import read_run
 
     cmd = ["ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py", "mode:=realtime"]
@@ -162,7 +190,7 @@ def measure(
     cmd += [f"out:={out}"] + ([f"executor:={executor}"] if executor else [])
     cmd += [f"keystore:={keystore}"] if keystore else []
     log = open(out.parent / f"{out.name}.log", "w")
-    busy = _start_load(load)
+    busy = _start_load(load, io_load)
     proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     try:
         # the steady part: from when the sim is publishing until just before the end
@@ -200,7 +228,10 @@ def measure(
         "recorded_samples": len(data["/pneu/linear/joint_state"]),
         "load_average": os.getloadavg()[0],
         "busy_processes": load,
+        "io_processes": io_load,
         "secured": bool(keystore),
+        "dropped_batches": int(sim.get("dropped_batches", "0")),
+        "realtime": sim.get("realtime", ""),
     }
     for axis in ("linear", "rotary"):
         missed = int(sim.get(f"missed.{axis}", "0"))
@@ -208,10 +239,14 @@ def measure(
         res[f"missed_pct.{axis}"] = 100.0 * missed / max(res["ticks"], 1)
         for name in ("late_ticks", "held_ticks", "ramped_ticks"):
             res[f"{name}.{axis}"] = int(sim.get(f"{axis}.{name}", "0"))
+        for q in ("p50", "p99", "max"):
+            v = sim.get(f"turnaround.{axis}_{q}_us")
+            res[f"turnaround_{q}_us.{axis}"] = float(v) if v not in (None, "") else None
         ta = _turnaround_us(data, axis)
         for q in (50, 99):
-            res[f"turnaround_p{q}_us.{axis}"] = float(np.percentile(ta, q)) if ta.size else None
-        res[f"turnaround_max_us.{axis}"] = float(ta.max()) if ta.size else None
+            v = float(np.percentile(ta, q)) if ta.size else None
+            res[f"bag_turnaround_p{q}_us.{axis}"] = v
+        res[f"bag_turnaround_max_us.{axis}"] = float(ta.max()) if ta.size else None
         res[f"safety_trips.{axis}"], res[f"first_trip_s.{axis}"] = _safety_trips(data, axis)
     for name in sorted(set(c0) | set(c1)):
         res[f"cpu_pct.{name}"] = 100.0 * (c1.get(name, 0) - c0.get(name, 0)) / _CLK / (t1 - t0)
@@ -241,7 +276,16 @@ def main(argv: list[str] | None = None) -> int:
         default=0,
         help="busy processes at normal priority beside the graph (0..16)",
     )
+    p.add_argument(
+        "--io-load",
+        type=int,
+        default=0,
+        help="memory/IO-pressure processes beside the graph (256 MiB touched, 32 MiB written "
+        "and fsynced, over and over; 0..8)",
+    )
     args = p.parse_args(argv)
+    if not 0 <= args.io_load <= 8:
+        p.error(f"--io-load: {args.io_load} refused; allowed: 0..8 processes")
     if not 0 <= args.load <= 16:
         p.error(f"--load: {args.load} refused; allowed: 0..16 busy processes")
     if not 10.0 <= args.duration <= 3600.0:
@@ -249,10 +293,13 @@ def main(argv: list[str] | None = None) -> int:
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="pneu_bench_ros_"))
     base.mkdir(parents=True, exist_ok=True)
     tag = ("_secured" if args.keystore else "") + (f"_load{args.load}" if args.load else "")
+    tag += f"_io{args.io_load}" if args.io_load else ""
     out = base / f"{args.deployment}_{args.executor or 'default'}{tag}"
     if out.exists():
         p.error(f"--out: {out} exists; allowed: a directory without a previous bench run")
-    res = measure(args.duration, args.deployment, args.executor, out, args.keystore, args.load)
+    res = measure(
+        args.duration, args.deployment, args.executor, out, args.keystore, args.load, args.io_load
+    )
     if args.json:
         print(json.dumps(res, indent=1))
     else:

@@ -23,8 +23,8 @@ runs keep the in-process runner's semantics (deterministic: no such feedback).
 
 ``hosted=True`` (the one-process deployment, :mod:`.controller_manager`):
 no sensor subscriptions; the host's 1 kHz loop calls :meth:`ControllerNode.compute`
-with each sample and the node publishes the command and state for monitoring,
-while its parameters stay live (``ros2 param set /linear_controller ...``).
+with each sample and publishes the command and state for monitoring from its publishing
+thread, while the node's parameters stay live (``ros2 param set /linear_controller ...``).
 """
 
 from __future__ import annotations
@@ -70,6 +70,8 @@ from pneu_control.nodes.controller_core import ControllerShellCore
 #: Controller-state rate when ``state_rate_hz`` is 0: every tick in lockstep (the runner's
 #: layout), 100 Hz in realtime (for people and plots; the bag keeps every command).
 STATE_RATE_AUTO_HZ = {"lockstep": 0.0, "realtime": 100.0}
+#: ``rt_priority`` -1 in realtime: one below the loop's (the launch files' ``rt_priority`` 50)
+REALTIME_PRIORITY = 49
 
 
 class ControllerNode(ShellDefaults, Node):
@@ -81,6 +83,10 @@ class ControllerNode(ShellDefaults, Node):
         self.axis = axis
         self.hosted = hosted
         self._declare_shell_parameters()
+        rt = self.get_parameter("rt_priority").value
+        if rt < 0:
+            rt = REALTIME_PRIORITY if self.get_parameter("mode").value == "realtime" else 0
+        self.process_rt_priority = 0 if hosted else rt
         mode = self.get_parameter("mode").value
         if mode not in ("lockstep", "realtime"):
             raise ParamError("mode", mode, "one of lockstep, realtime")
@@ -115,7 +121,7 @@ class ControllerNode(ShellDefaults, Node):
         )
 
     def _declare_shell_parameters(self) -> None:
-        """controllers_file, mode, state_rate_hz: read-only, read once at start."""
+        """controllers_file, mode, state_rate_hz, rt_priority: read-only, read once at start."""
         ro = {"read_only": True}
         self.declare_parameter(
             "controllers_file",
@@ -141,6 +147,17 @@ class ControllerNode(ShellDefaults, Node):
                 description="controller_state rate (the command goes out every tick); 0 = every "
                 "tick in lockstep, 100 Hz in realtime",
                 floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1000.0)],
+                **ro,
+            ),
+        )
+        self.declare_parameter(
+            "rt_priority",
+            -1,
+            ParameterDescriptor(
+                description="SCHED_FIFO priority of every thread of this process (it computes "
+                "the axis on its executor thread); 0 = normal scheduling, -1 = 49 in realtime "
+                "(one below the loop's default 50), 0 in lockstep; ignored when hosted",
+                integer_range=[IntegerRange(from_value=-1, to_value=98, step=1)],
                 **ro,
             ),
         )
@@ -204,15 +221,16 @@ class ControllerNode(ShellDefaults, Node):
         if line is not None:
             self.get_logger().warning(line)
 
-    def compute(self, s: SensorSample) -> float:
-        """Hosted mode: the host's loop hands over sample ``s``; returns u (V) and publishes
-        the command and state (monitoring and bags)."""
+    def compute(self, s: SensorSample) -> tuple[float, list]:
+        """Hosted mode: the host's loop hands over sample ``s``; returns u (V) and the command
+        and state messages, ``(publish, payload)`` pairs for the loop's publishing thread
+        (monitoring and bags: :mod:`pneu_msgs_py.nodes.hosted`)."""
         u = self.core.update(s)
         cmd, state = self.core.answer(s.stamp_ns, u)
-        self.cmd_pub.publish(cmd)
+        out = [(self.cmd_pub.publish, cmd)]
         if state is not None:
-            self.state_pub.publish(state)
-        return u
+            out.append((self.state_pub.publish, state))
+        return u, out
 
     # -- parameters ----------------------------------------------------------
     def _coerce(self, params: list[Parameter]) -> list[Parameter]:

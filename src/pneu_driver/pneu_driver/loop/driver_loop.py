@@ -42,13 +42,13 @@ import time
 from collections.abc import Callable, Iterable
 
 from pneu_msgs_py.contract.samples import AXES, SensorSample
+from pneu_msgs_py.lifecycle.realtime import enable_realtime
 
 from pneu_driver.daq.backend import DaqBackend
 from pneu_driver.daq.claim import device_claim
 from pneu_driver.daq.errors import DriverError, LateCycleError
 from pneu_driver.daq.rig import RigParams
 from pneu_driver.daq.scaling import RawSample, Scaler
-from pneu_driver.loop.rt import enable_realtime
 from pneu_driver.loop.stats import LoopStats
 from pneu_driver.safety import SAFE_V, AxisStatus, SafetyEvent, SafetySupervisor, check_plumbing
 

@@ -37,9 +37,11 @@ from pneu_msgs_py.contract.topics import (
     sub_qos_for,
 )
 from pneu_msgs_py.contract.wire import SENSOR_TOPICS, CommandWire, SensorWire
+from pneu_msgs_py.nodes.handoff import Handoff
+from pneu_msgs_py.nodes.hosted import answer_hosts
 from pneu_msgs_py.nodes.run import ShellDefaults, run_node
-from pneu_msgs_py.params.core import ParamError
-from rcl_interfaces.msg import ParameterDescriptor
+from pneu_msgs_py.params.core import ParamError, with_updates
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from rclpy import qos as rq
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -58,8 +60,11 @@ _LEVEL = {"OK": 0, "WARN": 1, "ERROR": 2}
 
 class DriverNode(ShellDefaults, Node):
     """``hosted=True``: the one-process deployment; no command subscriptions, and the manager
-    sets :attr:`hosts` (``axis``, ``compute(sample) -> u``) before :meth:`start`: the loop
-    thread calls them with each sample."""
+    sets :attr:`hosts` (``axis``, ``compute(sample) -> (u, messages)``) before :meth:`start`:
+    the loop thread calls them with each sample and hands the topics to its publishing
+    thread (:mod:`pneu_msgs_py.nodes.hosted`). The loop thread runs at SCHED_FIFO
+    ``rt_priority`` (the rig file's ``loop.rt_priority`` unless set), every other thread of
+    the process one below."""
 
     def __init__(self, hosted: bool = False, **node_kwargs):
         super().__init__("pneu_driver", **node_kwargs)
@@ -71,6 +76,12 @@ class DriverNode(ShellDefaults, Node):
         if axes not in choices:
             raise ParamError("axes", axes, "one of " + ", ".join(choices))
         rig = load_rig_params(self.get_parameter("rig_file").value or None)
+        rt = self.get_parameter("rt_priority").value
+        if rt >= 0:  # the launch's (or the user's) priority wins over the rig file's
+            rig = with_updates(rig, {"loop.rt_priority": rt})
+        rt = rig.loop.rt_priority
+        self.process_rt_priority = rt - 1 if rt > 1 else 0
+        self.outbox = Handoff(on_error=self._publish_failed) if hosted else None
         safety = load_safety_params(self.get_parameter("safety_file").value or None)
         backend = self.get_parameter("backend").value
         if backend_kind(backend) == "nidaqmx":
@@ -149,6 +160,16 @@ class DriverNode(ShellDefaults, Node):
             ),
         )
         self.declare_parameter(
+            "rt_priority",
+            -1,
+            ParameterDescriptor(
+                description="SCHED_FIFO priority of the 1 kHz loop thread, the process's other "
+                "threads one below (0 = normal scheduling; -1 = the rig file's loop.rt_priority)",
+                integer_range=[IntegerRange(from_value=-1, to_value=99, step=1)],
+                **ro,
+            ),
+        )
+        self.declare_parameter(
             "axes",
             "both",
             ParameterDescriptor(
@@ -175,6 +196,8 @@ class DriverNode(ShellDefaults, Node):
         )
 
     def start(self) -> None:
+        if self.outbox is not None:
+            self.outbox.start()  # before the loop: it inherits this thread's priority
         self.thread = self.loop.start(name="pneu_driver_loop")
         self.get_logger().info(f"driver loop running on {self.device}")
 
@@ -188,6 +211,8 @@ class DriverNode(ShellDefaults, Node):
         self.loop.stop()  # the loop's finally writes 5 V and closes the tasks
         if self.thread is not None:
             self.thread.join(timeout=2.0)
+        if self.outbox is not None:
+            self.outbox.close()
 
     # -- loop thread ---------------------------------------------------------
     def _publish_sample(self, s) -> None:
@@ -196,6 +221,17 @@ class DriverNode(ShellDefaults, Node):
         ):  # ROS clock at the first sample vs its stamp (epoch estimate)
             self.stamp_offset_ns = self.get_clock().now().nanoseconds - s.stamp_ns
         pubs = self.pubs
+        if self.outbox is not None:  # hosted: the controllers first, the topics after
+            msgs = [(pubs[topic].publish, data) for topic, data in self.wire.encode(s)]
+            msgs += answer_hosts(
+                s,
+                self.hosts,
+                self.crashed,
+                lambda axis, u: self.loop.put_command(axis, u, s.stamp_ns),
+                self.get_logger().error,
+            )
+            self.outbox.put(msgs)
+            return
         try:
             for topic, data in self.wire.encode(s):
                 pubs[topic].publish(data)
@@ -203,17 +239,14 @@ class DriverNode(ShellDefaults, Node):
             if self.context.ok():
                 raise
             self.loop.stop()  # Ctrl-C shut rclpy down first: stop quietly, the valves go safe
-            return
-        for h in self.hosts:  # one-process deployment: the controllers answer at once
-            if h.axis in self.crashed:
-                continue
-            try:
-                u = h.compute(s)
-            except Exception as err:  # a crashed controller falls silent: the watchdog acts
-                self.crashed[h.axis] = f"{type(err).__name__}: {err}"
-                self.get_logger().error(f"{h.axis} controller raised {self.crashed[h.axis]}")
-                continue
-            self.loop.put_command(h.axis, u, s.stamp_ns)
+
+    def _publish_failed(self, err: BaseException) -> None:
+        """The publishing thread's publish raised: an error while rclpy runs; at shutdown the
+        loop stops quietly (the valves go safe)."""
+        if self.context.ok():
+            self.get_logger().error(f"publishing failed: {type(err).__name__}: {err}")
+        else:
+            self.loop.stop()
 
     def _queue_events(self, events) -> None:
         self.events.extend(events)  # published from the executor thread (one publisher, one thread)

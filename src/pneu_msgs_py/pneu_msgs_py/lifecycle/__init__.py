@@ -7,5 +7,7 @@
   written (refused when non-empty unless ``--overwrite``, locked against a
   second writer, never one of the inputs), written under ``.partial`` names
   and renamed when complete;
-- :mod:`.duration` -- the one duration cap of every command.
+- :mod:`.duration` -- the one duration cap of every command;
+- :mod:`.realtime` -- what a 1 kHz process asks of the OS (SCHED_FIFO, locked memory,
+  timer slack), what it could not get and what that costs, in one line.
 """

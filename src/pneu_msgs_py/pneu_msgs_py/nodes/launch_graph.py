@@ -45,6 +45,7 @@ __all__ = [
     "launch_arguments",
     "io_node",
     "launch_description",
+    "realtime_priority",
     "security_actions",
     "logger_node",
     "reference_overrides",
@@ -107,6 +108,14 @@ def launch_arguments(gains_default: str, gains_why: str) -> list[tuple[str, str,
         ("linear_reference", "", "reference of the linear axis only (wins over reference)", None),
         ("rotary_reference", "", "reference of the rotary axis only (wins over reference)", None),
         ("axes", "both", "active axes (the others hold 5 V)", list(AXES_OF)),
+        (
+            "rt_priority",
+            "50",
+            "realtime: SCHED_FIFO priority of the 1 kHz loop thread; every other thread of its "
+            "process and the controllers' processes run one below, their memory locked (0 = "
+            "normal scheduling; an account without the privilege: one line, then normal)",
+            None,
+        ),
     ]
 
 
@@ -133,10 +142,12 @@ def common_parameters(arg: dict[str, str]) -> dict[str, Any]:
 
 def controller_overrides(arg: dict[str, str], axis: str, mode: str) -> dict[str, Any]:
     """A controller node's parameters from the launch arguments (on top of the gain file)."""
+    rt = int(arg["rt_priority"])
     over: dict[str, Any] = {
         "mode": mode,
         "use_sim_time": mode == "lockstep",
         "state_rate_hz": float(arg["state_rate_hz"]),
+        "rt_priority": rt - 1 if mode == "realtime" and rt > 1 else 0,
         **common_parameters(arg),
     }
     if arg["controller"]:
@@ -440,6 +451,30 @@ def security_actions(keystore: str, target: str) -> list[Any]:
     return []
 
 
+def realtime_priority(arg: dict[str, str]) -> int:
+    """The graph's loop priority (``rt_priority``, realtime only), checked once for the whole
+    launch: without the privilege, one line says what could not be set and what that costs,
+    and the graph runs at normal priority (no node repeats it)."""
+    import sys
+
+    from pneu_msgs_py.lifecycle.realtime import missing_line, privilege
+
+    text = arg["rt_priority"]
+    try:
+        rt = int(text)
+    except ValueError:
+        rt = -1
+    if not 0 <= rt <= 98:
+        raise RuntimeError(f"rt_priority: {text!r} refused; allowed: an integer 0..98")
+    if arg.get("mode", "realtime") != "realtime" or rt == 0:
+        return rt
+    priv = privilege()
+    line = missing_line(rt, priv, who="the graph")
+    if line:
+        print("[WARN] " + line, file=sys.stderr)
+    return rt if priv.fifo(rt) else 0
+
+
 def launch_description(
     args: list[tuple[str, str, str, list | None]],
     setup: Callable[[dict[str, str]], list[Any]],
@@ -457,6 +492,8 @@ def launch_description(
     def _setup(context):
         values = {name: LaunchConfiguration(name).perform(context) for name, *_ in args}
         io = target(values) if callable(target) else target
+        if "rt_priority" in values:  # the graphs with a 1 kHz loop (sim, rig)
+            values["rt_priority"] = str(realtime_priority(values))
         return [*security_actions(values["keystore"], io), *setup(values)]
 
     return LaunchDescription(

@@ -11,7 +11,11 @@ the Jazzy shape (ros2/demos ``talker.py``) plus what a rig needs:
    or ``auto`` (events where this rclpy has it). Chosen by the node's
    ``executor`` parameter if it declares one, else the environment variable
    ``PNEU_EXECUTOR``, else the node's default;
-3. ``node.start()``, then spin until ``node.done`` (a Future, or forever when
+3. with a node's ``process_rt_priority`` > 0, every thread of the process (the executor,
+   the DDS threads; the loop and publishing threads that ``start`` creates inherit it) at
+   SCHED_FIFO that priority and its memory locked -- or one warning line saying what could
+   not be set, what that costs and how to grant it (:mod:`pneu_msgs_py.lifecycle.realtime`);
+   ``node.start()``, then spin until ``node.done`` (a Future, or forever when
    None), Ctrl-C or an external shutdown (SIGTERM) -- in slices of
    :data:`SPIN_SLICE_S`, so that a signal is always seen. Once spinning, a SIGINT
    only asks the spin to end (:class:`_StopRequest`): Python's own handler raised
@@ -60,6 +64,7 @@ class NodeShell(Protocol):
 
     default_executor: str  # one of EXECUTORS: what works and measures best for this node
     done: Any  # an rclpy Future to spin until, or None: spin until stopped
+    process_rt_priority: int  # > 0: every thread of the process at SCHED_FIFO this (DESIGN §10)
 
     def start(self) -> None:
         """Called once the executor is ready, before spinning (start threads, timers)."""
@@ -76,6 +81,7 @@ class ShellDefaults:
 
     default_executor = "auto"
     done: Any = None
+    process_rt_priority = 0
 
     def start(self) -> None:
         pass
@@ -168,6 +174,17 @@ def _before_init(name: str, args: list[str] | None) -> None:
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 
+def _realtime(node: Any, priority: int) -> None:
+    """Step 3's realtime settings for the whole process, said in the node's log."""
+    from pneu_msgs_py.lifecycle.realtime import realtime_process
+
+    notes, missing = realtime_process(priority)
+    if notes:
+        node.get_logger().info("realtime: " + "; ".join(notes))
+    if missing:
+        node.get_logger().warning(missing)
+
+
 class _StopRequest:
     """SIGINT while spinning: remembered (``bool(self)``), never raised into a callback; the
     spin loop sees it within :data:`SPIN_SLICE_S`. Restores the previous handler on exit."""
@@ -214,9 +231,10 @@ def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | No
             executor.add_node(n)
         # what start-up made (rclpy, numpy, the cores: every object alive now) leaves the cyclic
         # collector, so a full collection at a random callback does not walk it all
-        # (milliseconds; the realtime loops do the same: pneu_driver.loop.rt)
+        # (milliseconds; the realtime loops do the same: pneu_msgs_py.lifecycle.realtime)
         gc.collect()
         gc.freeze()
+        _realtime(node, max(n.process_rt_priority for n in nodes))
         for n in nodes:
             n.start()
         # Spin in slices: Python gets control back every SPIN_SLICE_S, so Ctrl-C and SIGTERM

@@ -106,9 +106,10 @@ class RealtimeParams:
         read_only=True,
     )
     rt_priority: int = param(
-        0,
-        desc="SCHED_FIFO priority of the loop thread (0 = normal scheduling; needs CAP_SYS_NICE "
-        "or an rtprio limit, else a warning and normal scheduling)",
+        50,
+        desc="SCHED_FIFO priority of the loop thread, the node's other threads one below (0 = "
+        "normal scheduling; needs CAP_SYS_NICE or an rtprio limit, else one warning line and "
+        "normal scheduling)",
         lo=0,
         hi=99,
         read_only=True,
@@ -340,7 +341,7 @@ class SimLoop:
         import sys
         import time
 
-        from pneu_driver.loop.rt import enable_realtime
+        from pneu_msgs_py.lifecycle.realtime import enable_realtime
 
         old_switch = sys.getswitchinterval()
         if self.p.switch_interval_us > 0:

@@ -19,8 +19,13 @@ simulated time has been published.
 
 ``hosted=True`` (the one-process deployment, ``pneu_control``'s
 ``controller_manager``): no command subscriptions; the manager sets
-:attr:`SimNode.hosts` -- objects with ``axis`` and ``compute(sample) -> u`` --
-before the node starts, and the realtime loop calls them with each sample.
+:attr:`SimNode.hosts` -- objects with ``axis`` and ``compute(sample) -> (u, messages)``
+-- before the node starts; the realtime loop calls them with each sample and hands the
+topics (the sample, the commands, the states) to its publishing thread
+(:mod:`pneu_msgs_py.nodes.hosted`).
+
+Realtime: the loop thread at SCHED_FIFO ``realtime.rt_priority``, every other thread of the
+process one below (``process_rt_priority``, :func:`pneu_msgs_py.nodes.run.run_node`).
 """
 
 from __future__ import annotations
@@ -47,6 +52,8 @@ from pneu_msgs_py.contract.topics import (
     sub_qos_for,
 )
 from pneu_msgs_py.contract.wire import SENSOR_TOPICS, CommandWire, SensorWire, clock_bytes
+from pneu_msgs_py.nodes.handoff import Handoff
+from pneu_msgs_py.nodes.hosted import answer_hosts
 from pneu_msgs_py.nodes.run import ShellDefaults, run_node
 from pneu_msgs_py.params.core import ParamError, from_dict, with_updates
 from pneu_msgs_py.params.ros import declarations
@@ -107,6 +114,9 @@ class SimNode(ShellDefaults, Node):
         self.halted = ""  # e-stopped without a supervisor: time stands still
         self.second_io = ""  # another sim or driver seen on the domain
         self.crashed: dict[str, str] = {}  # hosted controllers that raised
+        rt = p.realtime.rt_priority
+        self.process_rt_priority = rt - 1 if p.mode == "realtime" and rt > 1 else 0
+        self.outbox = Handoff(on_error=self._publish_failed) if hosted else None
         from rclpy import qos as rq
 
         self.wire = SensorWire()
@@ -185,6 +195,8 @@ class SimNode(ShellDefaults, Node):
         if self.loop is not None:
             self.loop.stop_event.set()
             self.loop.finished.wait(timeout=2.0)
+        if self.outbox is not None:
+            self.outbox.close()
         self.core.safe_outputs()  # a real rig would now be at 5 V on both valves
 
     def exit_code(self) -> int:
@@ -218,27 +230,34 @@ class SimNode(ShellDefaults, Node):
         self.t_published = time.monotonic()
 
     def _realtime_sample(self, s) -> None:
-        """Realtime loop thread: publish sample k; hosted controllers answer it at once."""
+        """Realtime loop thread: publish sample k -- hosted: the controllers answer it first,
+        and the sample, the commands and the states go to the publishing thread."""
+        if self.outbox is not None:
+            msgs = [(self.pubs[topic].publish, data) for topic, data in self.wire.encode(s)]
+            msgs += answer_hosts(
+                s,
+                self.hosts,
+                self.crashed,
+                lambda axis, u: self.loop.offer(axis, s.stamp_ns, u),
+                self.get_logger().error,
+            )
+            self.outbox.put(msgs)
+            self.t_published = time.monotonic()
+            return
         try:
             self._publish_sample(s)
         except Exception:
             if self.context.ok():
                 raise
             self.loop.stop_event.set()  # Ctrl-C shut rclpy down first: stop quietly
-            return
-        for h in self.hosts:
-            if h.axis in self.crashed:
-                continue
-            try:
-                u = h.compute(s)
-            except Exception as err:  # as the runner: a crashed controller falls silent
-                self.crashed[h.axis] = f"{type(err).__name__}: {err}"
-                self.get_logger().error(
-                    f"{h.axis} controller raised {self.crashed[h.axis]}; no more commands "
-                    "(the supervisor's watchdog takes the axis safe)"
-                )
-                continue
-            self.loop.offer(h.axis, s.stamp_ns, u)
+
+    def _publish_failed(self, err: BaseException) -> None:
+        """The publishing thread's publish raised: at shutdown (rclpy gone) the loop stops
+        quietly; otherwise it is an error of the node's."""
+        if self.context.ok():
+            self.get_logger().error(f"publishing failed: {type(err).__name__}: {err}")
+        elif self.loop is not None:
+            self.loop.stop_event.set()
 
     def _advance(self) -> None:
         """Lockstep: end of cycle k (every answer in, or the timeout) -> sample k+1."""
@@ -326,12 +345,16 @@ class SimNode(ShellDefaults, Node):
 
     def _start(self) -> None:
         self.started = True
+        if self.outbox is not None:
+            self.outbox.start()  # before the loop: it inherits this thread's priority, not 50
         if self.loop is not None:
             self.loop.start()
         else:
             self._publish_sample(self.core.reset())
 
     def _finish(self) -> None:
+        if self.outbox is not None:
+            self.outbox.close()  # the last samples and commands out before the final status
         if self.loop is None:
             self.core.safe_outputs()
             self._publish_safety_events(self._drain(), self.core.sample.stamp_ns)
@@ -425,6 +448,8 @@ class SimNode(ShellDefaults, Node):
         values.update(
             mode=self.p.mode, sim_time_s=f"{sim_s:.3f}", real_time_factor=f"{sim_s / elapsed:.3g}"
         )
+        if self.outbox is not None:
+            values.update(self.outbox.counters())
         if periodic:
             self._watch_graph()
             values.update(self._watch_publishers())
