@@ -90,7 +90,9 @@ def _children(root: int) -> dict[str, int]:
         except (OSError, IndexError, ValueError):
             continue
         names = {os.path.basename(c.decode(errors="replace")) for c in cmd}
-        for n in NODES:
+        if {"bag", "record"} <= names:
+            names.add("recorder")
+        for n in (*NODES, "recorder"):
             if n in names and (ppid == root or _ancestor(root, int(d.name))):
                 found[n] = int(d.name)
     return found
@@ -133,6 +135,8 @@ def test_as_launched_every_thread_of_the_loop_and_controller_processes_runs_fifo
             pol = _policies(kids[name])
             assert pol and all(p == os.SCHED_FIFO for p, _ in pol), (name, pol)
             assert {prio for _, prio in pol} <= {49, 50}, (name, pol)
+        rec = _policies(kids["recorder"])  # ros2 bag record: below the control, above others
+        assert rec and all(p == (os.SCHED_FIFO, 40) for p in rec), rec
         os.kill(proc.pid, signal.SIGINT)
         rest, _ = proc.communicate(timeout=EVENT_S)
     finally:

@@ -155,3 +155,25 @@ def test_refused_nothing_changes_and_one_line_says_why():
     assert r["notes"] == [] and r["fifo"] not in r["policies"], r
     assert r["line"].startswith("realtime: this process runs without SCHED_FIFO 20"), r
     assert "locked memory" in r["line"] and r["locked_kb"] == 0, r
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="Linux scheduling")
+def test_exec_at_runs_the_command_at_the_priority_it_may_have_and_its_exit_status():
+    import os
+    import subprocess
+
+    from pneu_msgs_py.lifecycle.realtime import privilege
+
+    show = "import os, sys; print(os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)"
+    wrap = [sys.executable, "-m", "pneu_msgs_py.lifecycle.realtime", "10", "--"]
+    res = subprocess.run([*wrap, sys.executable, "-c", show + "; sys.exit(3)"],
+                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert res.returncode == 3, res.stderr  # it became the command: its exit status
+    policy, prio = map(int, res.stdout.split())
+    if privilege().fifo(10):
+        assert (policy, prio) == (os.SCHED_FIFO, 10)
+    else:
+        assert policy == os.SCHED_OTHER
+    bad = subprocess.run([sys.executable, "-m", "pneu_msgs_py.lifecycle.realtime", "x", "true"],
+                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert bad.returncode == 1 and bad.stderr.startswith("usage: python -m pneu_msgs_py")

@@ -27,7 +27,14 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 
-__all__ = ["Privilege", "enable_realtime", "missing_line", "privilege", "realtime_process"]
+__all__ = [
+    "Privilege",
+    "enable_realtime",
+    "exec_at",
+    "missing_line",
+    "privilege",
+    "realtime_process",
+]
 
 _PR_SET_TIMERSLACK = 29
 _PR_GET_TIMERSLACK = 30
@@ -228,3 +235,22 @@ def realtime_process(priority: int, lock_memory: bool = True) -> tuple[list[str]
     else:
         notes.append(f"memory not locked (mlockall: errno {ctypes.get_errno()})")
     return notes, None
+
+
+def exec_at(priority: int, argv: list[str]) -> None:
+    """Become ``argv`` (``os.execvp``) at SCHED_FIFO ``priority``, which it keeps across the
+    exec (0 or refused: normal scheduling, silently -- the launch has said it once). The
+    launch files start ``ros2 bag record`` so, below the control path and above other work:
+    a recorder at normal priority drops samples when the cores are busy."""
+    if priority > 0 and privilege().fifo(priority):
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
+        except OSError:
+            pass
+    os.execvp(argv[0], argv)
+
+
+if __name__ == "__main__":  # python -m pneu_msgs_py.lifecycle.realtime PRIORITY -- CMD ARGS...
+    if len(sys.argv) < 4 or sys.argv[2] != "--" or not sys.argv[1].isdigit():
+        sys.exit("usage: python -m pneu_msgs_py.lifecycle.realtime PRIORITY -- CMD [ARGS...]")
+    exec_at(int(sys.argv[1]), sys.argv[3:])

@@ -188,7 +188,9 @@ def controller_and_logger_nodes(
                 )
             )
     if recorder == "rosbag2":
-        nodes.append(rosbag2_recorder(out, mode))
+        rt = int(arg.get("rt_priority", "0"))
+        prio = rt - RECORDER_BELOW if mode == "realtime" and rt > RECORDER_BELOW else 0
+        nodes.append(rosbag2_recorder(out, mode, prio))
     nodes.append(logger_node(out, mode, recorder, common_parameters(arg)))
     return nodes
 
@@ -363,9 +365,16 @@ def rosbag2_qos_overrides(mode: str) -> dict[str, dict[str, Any]]:
     return out
 
 
-def rosbag2_recorder(out: str, mode: str) -> Any:
-    """``ros2 bag record -s mcap`` of every pneu topic into ``<out>/bag``."""
+#: the recorder's SCHED_FIFO priority below the loop's: above other work (at normal priority
+#: it dropped a third of the samples beside a busy machine), below every control thread
+RECORDER_BELOW = 10
+
+
+def rosbag2_recorder(out: str, mode: str, rt_priority: int = 0) -> Any:
+    """``ros2 bag record -s mcap`` of every pneu topic into ``<out>/bag`` (at SCHED_FIFO
+    ``rt_priority`` when > 0: :func:`pneu_msgs_py.lifecycle.realtime.exec_at`)."""
     import os
+    import sys
 
     import yaml
     from launch.actions import ExecuteProcess
@@ -379,6 +388,9 @@ def rosbag2_recorder(out: str, mode: str) -> Any:
     cmd = ["ros2", "bag", "record", "-s", "mcap", "-o", os.path.join(out, "bag")]
     cmd += ["--qos-profile-overrides-path", qos_file, "--max-cache-size", str(64 << 20)]
     cmd += ["--disable-keyboard-controls", "--topics", *(t.name for t in TOPICS)]
+    if rt_priority > 0:
+        wrap = [sys.executable, "-m", "pneu_msgs_py.lifecycle.realtime", str(rt_priority), "--"]
+        cmd = wrap + cmd
     from pneu_msgs_py.contract.security import enclave
 
     return ExecuteProcess(
