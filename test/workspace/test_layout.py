@@ -559,6 +559,10 @@ def test_launch_files_start_existing_executables_with_valid_parameters(path, ove
     if overrides.get("recorder") == "rosbag2" or realtime == "realtime":
         (rec,) = recorders
         cmd = rec.kwargs["cmd"]
+        if cmd[0] != "ros2":  # at SCHED_FIFO below the control path (realtime, privileged)
+            assert cmd[1:3] == ["-m", "pneu_msgs_py.lifecycle.realtime"] and cmd[4] == "--"
+            assert 0 < int(cmd[3]) < 49
+            cmd = cmd[5:]
         assert cmd[:6] == ["ros2", "bag", "record", "-s", "mcap", "-o"]
         assert cmd[6] == str(tmp_path / "run" / "bag")
         qos = yaml.safe_load(Path(cmd[cmd.index("--qos-profile-overrides-path") + 1]).read_text())
