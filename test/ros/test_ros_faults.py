@@ -53,7 +53,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -63,17 +62,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pneu_driver.safety import load_safety_params
+from pneu_msgs_py.bag.reader import read_run
+from pneu_msgs_py.params.paths import config_file
 
-pytest.importorskip("rclpy")
-if shutil.which("ros2") is None:
-    pytest.skip("ros2 CLI not on PATH", allow_module_level=True)
-_prefix = subprocess.run(["ros2", "pkg", "prefix", "pneu_sim"], capture_output=True, text=True)
-if _prefix.returncode != 0:
-    pytest.skip("pneu packages not built/sourced (colcon build)", allow_module_level=True)
-
-from pneu_driver.safety import load_safety_params  # noqa: E402
-from pneu_msgs_py.bag.reader import read_run  # noqa: E402
-from pneu_msgs_py.params.paths import config_file  # noqa: E402
+pytestmark = pytest.mark.ros
 
 WATCHDOG_NS = round(load_safety_params(None).watchdog_ms * 1e6)
 T_NS = 1_000_000

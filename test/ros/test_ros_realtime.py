@@ -16,15 +16,9 @@ import threading
 from pathlib import Path
 
 import pytest
+from pneu_msgs_py.lifecycle.realtime import privilege
 
-pytest.importorskip("rclpy")
-if shutil.which("ros2") is None:
-    pytest.skip("ros2 CLI not on PATH", allow_module_level=True)
-_prefix = subprocess.run(["ros2", "pkg", "prefix", "pneu_sim"], capture_output=True, text=True)
-if _prefix.returncode != 0:
-    pytest.skip("pneu packages not built/sourced (colcon build)", allow_module_level=True)
-
-from pneu_msgs_py.lifecycle.realtime import privilege  # noqa: E402
+pytestmark = pytest.mark.ros
 
 EVENT_S = 180.0  # the longest a launch may take to start and end on a busy machine
 LAUNCH = ["ros2", "launch", "--noninteractive", "pneu_sim", "sim.launch.py", "mode:=realtime"]

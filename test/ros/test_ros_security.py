@@ -14,7 +14,6 @@ credentials cannot even create the publisher; unsecured, the same rogue changes 
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -22,20 +21,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pneu_control.experiment import session
+from pneu_control.experiment.runner import run
+from pneu_msgs_py.bag.reader import read_run
+from pneu_msgs_py.contract.security import enclave
+from pneu_msgs_py.params.paths import config_file
 
-pytest.importorskip("rclpy")
-pytest.importorskip("sros2")
-if shutil.which("ros2") is None:
-    pytest.skip("ros2 CLI not on PATH", allow_module_level=True)
-_prefix = subprocess.run(["ros2", "pkg", "prefix", "pneu_sim"], capture_output=True, text=True)
-if _prefix.returncode != 0:
-    pytest.skip("pneu packages not built/sourced (colcon build)", allow_module_level=True)
-
-from pneu_control.experiment import session  # noqa: E402
-from pneu_control.experiment.runner import run  # noqa: E402
-from pneu_msgs_py.bag.reader import read_run  # noqa: E402
-from pneu_msgs_py.contract.security import enclave  # noqa: E402
-from pneu_msgs_py.params.paths import config_file  # noqa: E402
+pytestmark = pytest.mark.ros("sros2")
 
 _UNSECURED = ("ROS_SECURITY_ENABLE", "ROS_SECURITY_STRATEGY", "ROS_SECURITY_KEYSTORE")
 

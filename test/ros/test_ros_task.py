@@ -15,22 +15,16 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 
 import numpy as np
 import pytest
-
-pytest.importorskip("rclpy")
-if shutil.which("ros2") is None:
-    pytest.skip("ros2 CLI not on PATH", allow_module_level=True)
-if subprocess.run(["ros2", "pkg", "prefix", "pneu_control"], capture_output=True).returncode:
-    pytest.skip("pneu packages not built/sourced (colcon build)", allow_module_level=True)
-
 from pneu_control.task.session import execute_task, prepare
 from pneu_msgs_py.bag.reader import read_run
 from pneu_msgs_py.params.paths import config_file
+
+pytestmark = pytest.mark.ros
 
 TASK = "tasks/coupling_insert_lock.yaml"
 
