@@ -1,4 +1,5 @@
-"""test/ros: a module that starts the graph marks itself ``pytestmark = pytest.mark.ros``
+"""test/ros: a module that starts the graph skips without rclpy (``pytest.importorskip``) and marks
+itself ``pytestmark = pytest.mark.ros``
 (``pytest.mark.ros("sros2")``: more modules it needs). Such a test needs rclpy, the ``ros2``
 CLI and this workspace built and sourced (``colcon build`` + ``source install/setup.bash``);
 without them it is skipped with the reason, checked once per session.

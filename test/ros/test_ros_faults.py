@@ -66,6 +66,7 @@ from pneu_driver.safety import load_safety_params
 from pneu_msgs_py.bag.reader import read_run
 from pneu_msgs_py.params.paths import config_file
 
+pytest.importorskip("rclpy")  # rclpy-dependent: the rest (ros2, the workspace) in conftest
 pytestmark = pytest.mark.ros
 
 WATCHDOG_NS = round(load_safety_params(None).watchdog_ms * 1e6)

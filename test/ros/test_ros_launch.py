@@ -29,6 +29,7 @@ from pneu_control.experiment.runner import run
 from pneu_msgs_py.bag.reader import read_run
 from pneu_msgs_py.params.paths import config_file
 
+pytest.importorskip("rclpy")  # rclpy-dependent: the rest (ros2, the workspace) in conftest
 pytestmark = pytest.mark.ros
 
 EXECUTORS = ["events", "single"]

@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 from pneu_msgs_py.lifecycle.realtime import privilege
 
+pytest.importorskip("rclpy")  # rclpy-dependent: the rest (ros2, the workspace) in conftest
 pytestmark = pytest.mark.ros
 
 EVENT_S = 180.0  # the longest a launch may take to start and end on a busy machine

@@ -27,6 +27,7 @@ from pneu_msgs_py.bag.reader import read_run
 from pneu_msgs_py.contract.security import enclave
 from pneu_msgs_py.params.paths import config_file
 
+pytest.importorskip("rclpy")  # rclpy-dependent: the rest (ros2, the workspace) in conftest
 pytestmark = pytest.mark.ros("sros2")
 
 _UNSECURED = ("ROS_SECURITY_ENABLE", "ROS_SECURITY_STRATEGY", "ROS_SECURITY_KEYSTORE")

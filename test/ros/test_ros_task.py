@@ -24,6 +24,7 @@ from pneu_control.task.session import execute_task, prepare
 from pneu_msgs_py.bag.reader import read_run
 from pneu_msgs_py.params.paths import config_file
 
+pytest.importorskip("rclpy")  # rclpy-dependent: the rest (ros2, the workspace) in conftest
 pytestmark = pytest.mark.ros
 
 TASK = "tasks/coupling_insert_lock.yaml"
