@@ -107,7 +107,9 @@ class Handoff:
         return len(self._queue)
 
     def close(self, timeout_s: float = 2.0) -> None:
-        """Publish what is queued (up to ``timeout_s``), stop the thread, close the pipe (once)."""
+        """Publish what is queued (up to ``timeout_s``), stop the thread (once). Only the pipe's
+        read end is closed here: a late :meth:`put` from a loop still ending then fails on its
+        own write end (EPIPE, ignored) instead of writing into a file that reused the number."""
         if self._closed:
             return
         self._closed = self._closing = True
@@ -117,11 +119,14 @@ class Handoff:
             pass
         if self._thread is not None:
             self._thread.join(timeout_s)
-        for fd in (self._w, self._r):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        if self._thread is None or not self._thread.is_alive():
+            os.close(self._r)
+
+    def __del__(self) -> None:
+        try:
+            os.close(self._w)
+        except (OSError, AttributeError):
+            pass
 
     def counters(self) -> dict[str, str]:
         """For ``/diagnostics``: batches published, dropped and failed."""
