@@ -243,10 +243,10 @@ class DriverNode(ShellDefaults, Node):
     def _publish_failed(self, err: BaseException) -> None:
         """The publishing thread's publish raised: an error while rclpy runs; at shutdown the
         loop stops quietly (the valves go safe)."""
-        if self.context.ok():
-            self.get_logger().error(f"publishing failed: {type(err).__name__}: {err}")
-        else:
+        if not self.context.ok():
             self.loop.stop()
+        elif self.outbox is not None and self.outbox.errors == 1:  # once; counted after
+            self.get_logger().error(f"publishing failed: {type(err).__name__}: {err}")
 
     def _queue_events(self, events) -> None:
         self.events.extend(events)  # published from the executor thread (one publisher, one thread)

@@ -261,8 +261,9 @@ def run_node(name: str, make_node: Callable[[], NodeShell], args: list[str] | No
                     executor.shutdown()
                 except Exception:  # already stopped by the signal
                     pass
+            for n in nodes:  # the loop's node first: its loop stops before a hosted
+                n.safe_shutdown()  # controller's publishers go
             for n in reversed(nodes):
-                n.safe_shutdown()
                 n.destroy_node()
             rclpy.try_shutdown()
         finally:

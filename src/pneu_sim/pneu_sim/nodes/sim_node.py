@@ -253,11 +253,12 @@ class SimNode(ShellDefaults, Node):
 
     def _publish_failed(self, err: BaseException) -> None:
         """The publishing thread's publish raised: at shutdown (rclpy gone) the loop stops
-        quietly; otherwise it is an error of the node's."""
-        if self.context.ok():
+        quietly; otherwise an error of the node's, said once (the publishing thread counts them)."""
+        if not self.context.ok():
+            if self.loop is not None:
+                self.loop.stop_event.set()
+        elif self.outbox is not None and self.outbox.errors == 1:  # once; counted after
             self.get_logger().error(f"publishing failed: {type(err).__name__}: {err}")
-        elif self.loop is not None:
-            self.loop.stop_event.set()
 
     def _advance(self) -> None:
         """Lockstep: end of cycle k (every answer in, or the timeout) -> sample k+1."""
