@@ -32,7 +32,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from pneu_control.sysid import model, shooting
+from pneu_control.sysid import model, shooting, starts
 from pneu_control.sysid.record import AXIS_SIGNALS, Record
 
 __all__ = ["AxisFit", "FitOptions", "fit_axis"]
@@ -152,8 +152,14 @@ def fit_axis(
     if not {f"{'valve_' + axis}.Q_n", f"valve_{axis}.{model.DEAD_BAND}"} <= set(first):
         return full.solve(None, log)
     stage()
+    mech = starts.mechanical_start(axis, base, records, names, log)
+    base1 = base
+    if mech:  # the flow-curve stage sees the mechanics the motions show, not the catalogue's
+        p_mech = tuple(p for p in model.AXIS_PARAMS[axis] if p.name in mech)
+        base1 = model.apply(base, p_mech, [mech[p.name] for p in p_mech])
     log(f"  {axis}: stage 1, the valve's flow curve ({', '.join(first)})")
-    start, _ = _flow_curve_start(axis, base, records, options, first, {}, log)
+    start, _ = _flow_curve_start(axis, base1, records, options, first, {}, log)
+    start.update(mech)
     stage()
     log(f"  {axis}: stage 2, every parameter")
     fit = full.solve(start, log)
