@@ -35,7 +35,7 @@ import numpy as np
 from pneu_control.sysid import model, shooting, starts
 from pneu_control.sysid.record import AXIS_SIGNALS, Record
 
-__all__ = ["AxisFit", "FitOptions", "fit_axis"]
+__all__ = ["AxisFit", "FitOptions", "fit_axis", "refit", "with_replicate"]
 
 _OFFSET_WIDTH = 5e3  # Pa: z = 1 is one Huba accuracy band
 # Huba 511: ±0.5 % FS = ±5 kPa; the bound allows 1.5x that, so an offset cannot
@@ -83,6 +83,10 @@ class AxisFit:
     n_residuals: int
     status: str
     plant: object = None  # the fitted PlantParams
+    sigma_iid: list[float] = field(default_factory=list)  # 1 σ, white residuals inflated by τ
+    n_clusters: int = 0  # replayed segments the sandwich σ rests on
+    sigma_fit: list[float] = field(default_factory=list)  # 1 σ of the fit alone (the sandwich)
+    replicate_shift: list[float] = field(default_factory=list)  # d of the bootstrap draw
 
     def ci95(self, i: int) -> float:
         """95 % half-width of parameter ``i`` (1.96 σ), in its unit."""
@@ -184,6 +188,22 @@ def fit_axis(
     return fit2 if fit2.cost < fit.cost else fit
 
 
+def refit(axis: str, base, records: list[Record], fit: AxisFit, options: FitOptions | None = None):
+    """The least squares of ``fit``'s parameters on other ``records``, from ``fit``'s values
+    (the offsets from 0): the stage-2 fit alone, as :func:`fit_axis` ends."""
+    options = replace(options or FitOptions(), params=tuple(fit.names))
+    problem = _Problem(axis, base, records, options)
+    return problem.solve(dict(zip(fit.names, fit.value)), lambda _m: None)
+
+
+def with_replicate(fit: AxisFit, again: AxisFit) -> AxisFit:
+    """``fit`` with the parametric-bootstrap draw ``again`` (:mod:`pneu_control.sysid.replicate`):
+    σ = √(σ_fit² + d²), d = again − fit per parameter."""
+    d = [a - v for a, v in zip(again.value, fit.value)]
+    sigma = [float(np.hypot(s, di)) for s, di in zip(fit.sigma, d)]
+    return replace(fit, sigma=sigma, sigma_fit=list(fit.sigma), replicate_shift=d)
+
+
 def _flow_curve_start(axis, base, records, options, first, offsets, log):
     """Stage 1 on ``base``: the start values of the flow curve (and offsets) and their cost."""
     long_ = _Problem(axis, base, records, replace(options, params=first))
@@ -240,6 +260,13 @@ class _Problem:
         self.n_off = len(self.pnames) * len(used)
         dec = options.decimate
         self.meas = [{n: r.y[n][s.index][::dec] for n in self.signals} for r, s in used]
+        # the replayed segment (cluster) of each residual row, over all the signals of a record
+        ids, c0 = [], 0
+        for _r, s in used:
+            seg_id = np.repeat(np.arange(len(s)), s.lengths)[::dec] + c0
+            c0 += len(s)
+            ids.extend(seg_id for _ in self.signals)
+        self.cluster, self.n_clusters = np.concatenate(ids), c0
         self.pivot = _pivots(axis, base, self.params, used)
         ob = OFFSET_BOUND_PA / _OFFSET_WIDTH
         self.lo = np.array([b[0] for b in bounds] + [-ob] * self.n_off)
@@ -343,7 +370,9 @@ class _Problem:
                 taus.append(_autocorr_time(r[k : k + n]))
                 k += n
         infl = float(np.median(taus)) if taus else 1.0
-        cov_z = np.linalg.pinv(J.T @ J) * s2 * infl
+        A_inv = np.linalg.pinv(J.T @ J)
+        cov_iid = A_inv * s2 * infl
+        cov_z = _segment_sandwich(A_inv, J, r, self.cluster, self.n_clusters)
         sd_z = np.sqrt(np.maximum(np.diag(cov_z), 0.0))
         vals, offs = self.unpack(res.x)
         # the parameters' covariance through the (pivoted) map z -> p, to first order
@@ -356,6 +385,7 @@ class _Problem:
             G[:, i] = (np.array(up) - np.array(dn)) / 2e-6
         cov_p = G @ cov_z[:n_p, :n_p] @ G.T
         sigma = [float(v) for v in np.sqrt(np.maximum(np.diag(cov_p), 0.0))]
+        sigma_iid = np.sqrt(np.maximum(np.diag(G @ cov_iid[:n_p, :n_p] @ G.T), 0.0))
         with np.errstate(invalid="ignore", divide="ignore"):
             corr = np.nan_to_num(cov_p / np.outer(sigma, sigma))
         offsets, offsets_sigma = {}, {}
@@ -383,8 +413,27 @@ class _Problem:
             inflation=infl,
             n_residuals=m_res,
             status=str(res.message),
+            sigma_iid=[float(v) for v in sigma_iid],
+            n_clusters=self.n_clusters,
             plant=model.apply(self.base, self.params, vals),
         )
+
+
+def _segment_sandwich(
+    A_inv: np.ndarray, J: np.ndarray, r: np.ndarray, cluster: np.ndarray, n_clusters: int
+) -> np.ndarray:
+    """Cluster-robust covariance of the least-squares estimate, one cluster per replayed
+    segment: (JᵀJ)⁻¹ (Σ_g J_gᵀ r_g r_gᵀ J_g) (JᵀJ)⁻¹ · G/(G − 1) (Liang & Zeger 1986; the
+    small-sample factor of Cameron & Miller 2015, sec. VI).
+
+    Within a segment the residuals are anything but independent (one start error runs
+    through the whole replay, a model error too); between segments they are nearly so. The
+    sandwich takes their covariance from the segments' own scores, whatever its form, so it
+    also widens with a model error that pulls different segments different ways."""
+    S = np.zeros((n_clusters, J.shape[1]))
+    np.add.at(S, cluster, J * r[:, None])
+    g = max(n_clusters, 2)
+    return A_inv @ (S.T @ S) @ A_inv * (g / (g - 1))
 
 
 def _scan_dead_band(
