@@ -14,13 +14,18 @@ Besides the plant parameters each bag gets its pressure sensors' offsets
 (nuisance parameters: the Huba 511's ±0.5 % FS), reported but not written
 to the plant file.
 
-Statistics at the optimum (linearised, Ljung's *System Identification*
-§9.3): cov = s² (JᵀJ)⁻¹ with s² = Σr²/(m − p), inflated by the residuals'
-integrated autocorrelation time (they are far from white: one 1 ms sample
-is not one independent observation); 95 % intervals ±1.96σ; the
-correlation matrix of the estimates, and every pair with |ρ| > 0.9 is
-reported: the two trade against each other (not separately identifiable
-from these bags).
+Statistics at the optimum: the covariance of the estimate is cluster-robust
+over the replayed segments (the sandwich (JᵀJ)⁻¹ (Σ_g J_gᵀ r_g r_gᵀ J_g)
+(JᵀJ)⁻¹: within a segment the residuals are anything but independent, one
+start error runs through the whole replay), and ``identify`` widens it by
+parametric-bootstrap draws (:mod:`pneu_control.sysid.replicate`: measured
+over noise seeds on a plant of the model's own family, the estimator scatters
+5-15 times more than any linearised covariance says -- the cost is rough
+where the motor creeps and sticks); the correlation matrix of the estimates,
+and every pair with |ρ| > 0.9 is reported: the two trade against each other
+(not separately identifiable from these bags). The linearised covariance of
+Ljung's *System Identification* §9.3 (s² (JᵀJ)⁻¹, inflated by the residuals'
+integrated autocorrelation time) is kept as ``sigma_iid`` for comparison.
 """
 
 from __future__ import annotations
@@ -86,12 +91,13 @@ class AxisFit:
     sigma_iid: list[float] = field(default_factory=list)  # 1 σ, white residuals inflated by τ
     n_clusters: int = 0  # replayed segments the sandwich σ rests on
     sigma_fit: list[float] = field(default_factory=list)  # 1 σ of the fit alone (the sandwich)
-    replicate_shift: list[float] = field(default_factory=list)  # d of the bootstrap draw
+    replicate_shift: list[float] = field(default_factory=list)  # RMS d of the bootstrap draws
     unexplained: list[str] = field(default_factory=list)  # the per-segment check's lines
+    q95: float = 1.96  # the 95 % quantile the intervals use (Student's t with the draws' dof)
 
     def ci95(self, i: int) -> float:
-        """95 % half-width of parameter ``i`` (1.96 σ), in its unit."""
-        return 1.96 * self.sigma[i]
+        """95 % half-width of parameter ``i`` (q95 σ), in its unit."""
+        return self.q95 * self.sigma[i]
 
     def rel_ci95(self, i: int) -> float:
         """95 % half-width relative to the value (log parameters; a dead band: in V)."""
@@ -244,12 +250,23 @@ def refit(axis: str, base, records: list[Record], fit: AxisFit, options: FitOpti
     return problem.solve(dict(zip(fit.names, fit.value)), lambda _m: None)
 
 
-def with_replicate(fit: AxisFit, again: AxisFit) -> AxisFit:
-    """``fit`` with the parametric-bootstrap draw ``again`` (:mod:`pneu_control.sysid.replicate`):
-    σ = √(σ_fit² + d²), d = again − fit per parameter."""
-    d = [a - v for a, v in zip(again.value, fit.value)]
-    sigma = [float(np.hypot(s, di)) for s, di in zip(fit.sigma, d)]
-    return replace(fit, sigma=sigma, sigma_fit=list(fit.sigma), replicate_shift=d)
+def with_replicate(fit: AxisFit, draws: list[AxisFit]) -> AxisFit:
+    """``fit`` with the parametric-bootstrap draws (:mod:`pneu_control.sysid.replicate`): per
+    parameter σ² = σ_fit² + mean(d²), d = draw − fit, and the 95 % quantile of Student's t
+    with as many degrees of freedom as draws (the draws are what the scatter is estimated
+    from: with B of them e/σ ~ t_B)."""
+    from scipy.stats import t as student_t
+
+    d = np.array([[a - v for a, v in zip(dr.value, fit.value)] for dr in draws])
+    ms = np.mean(d * d, axis=0)
+    sigma = [float(np.sqrt(s * s + m)) for s, m in zip(fit.sigma, ms)]
+    return replace(
+        fit,
+        sigma=sigma,
+        sigma_fit=list(fit.sigma),
+        replicate_shift=[float(v) for v in np.sqrt(ms)],
+        q95=float(student_t.ppf(0.975, len(draws))),
+    )
 
 
 def _flow_curve_start(axis, base, records, options, first, offsets, log):

@@ -47,7 +47,9 @@ class Check:
         if not self.unexplained:
             return []
         worst = sorted(self.unexplained, key=lambda c: -c[3])
-        shown = "; ".join(f"{lab} at {t0:.1f} s ({c / self.median:.0f}x)" for _r, lab, t0, c in worst[:4])
+        shown = "; ".join(
+            f"{lab} at {t0:.1f} s ({c / self.median:.0f}x)" for _r, lab, t0, c in worst[:4]
+        )
         more = f" and {len(worst) - 4} more" if len(worst) > 4 else ""
         return [
             f"{axis}: {len(worst)} segment(s) not explained by the identified values (cost "
@@ -107,7 +109,7 @@ def refit_unexplained(
     # one problem over all the picked records: their residuals side by side
     sub = _Union(subs)
     z = sub.solve(start)
-    vals, offs = subs[0].unpack(z)
+    vals, _ = subs[0].unpack(z)
     out = dict(zip(fit.names, vals))
     for p, o in zip(subs, sub.offsets(z)):
         out.update(p.offset_start(o))
@@ -140,8 +142,12 @@ class _Union:
 
         z0s = [p.z_start(start) for p in self.problems]
         z0 = np.concatenate([z0s[0][: self.n_p], *[z[self.n_p :] for z in z0s]])
-        lo = np.concatenate([self.problems[0].lo[: self.n_p], *[p.lo[self.n_p :] for p in self.problems]])
-        hi = np.concatenate([self.problems[0].hi[: self.n_p], *[p.hi[self.n_p :] for p in self.problems]])
+        lo = np.concatenate(
+            [self.problems[0].lo[: self.n_p], *[p.lo[self.n_p :] for p in self.problems]]
+        )
+        hi = np.concatenate(
+            [self.problems[0].hi[: self.n_p], *[p.hi[self.n_p :] for p in self.problems]]
+        )
 
         def res(z):
             return np.concatenate([p.residuals(zz) for p, zz in zip(self.problems, self._split(z))])

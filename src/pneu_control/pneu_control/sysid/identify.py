@@ -1,7 +1,7 @@
 """From bags to a calibrated plant.yaml: noise from quiet segments, the output-error fits, the file.
 
-Order: the sensor noise (first differences in the quiet segments: a robust
-σ = 1.4826·MAD(Δy)/√2, blind to slow drifts), then the cylinder (which also
+Order: the sensor noise (first differences in the quiet segments: their
+standard deviation within 5 robust σ of the median, /√2, blind to slow drifts), then the cylinder (which also
 fixes the polytropic index), then the motor with that index. Each fitted
 value goes into a copy of the base plant.yaml tree -- every other leaf and
 every key of a leaf (unit, source, and any optional key such as a ``range``)
@@ -163,8 +163,13 @@ def estimate_noise(records: list[Record], axes: tuple[str, ...]) -> dict[str, No
             d = np.concatenate(diffs) if diffs else np.zeros(0)
             if len(d) < 50:
                 continue
-            mad = float(np.median(np.abs(d - np.median(d))))
-            out[name] = NoiseEstimate(name, 1.4826 * mad / math.sqrt(2.0), len(d))
+            # the standard deviation of the differences within 5 robust σ of their median: as
+            # robust as the MAD against a step or a spike, but not quantised with the AI's
+            # steps (the MAD of 16-bit pressure readings moves in 8 % steps of σ)
+            med = float(np.median(d))
+            mad = float(np.median(np.abs(d - med)))
+            kept = d[np.abs(d - med) <= 5.0 * 1.4826 * mad] if mad > 0 else d
+            out[name] = NoiseEstimate(name, float(np.std(kept)) / math.sqrt(2.0), len(kept))
     return out
 
 
@@ -234,6 +239,7 @@ def identify(
     plant = base
     for fit in fits.values():
         plant = _taken(plant, fit, kept)
+        notes.extend(fit.unexplained)
     if "rotary" in axes and "linear" not in axes:
         notes.append(
             "ambient.n_poly not fitted: on the motor it only appears as n/V (fixed volumes); "
@@ -286,7 +292,7 @@ def _replicated(base, fits: dict[str, AxisFit], recs, noise, options, log) -> di
     measured noise), each axis fitted again from its values; an axis without a design in
     its bags keeps its fit's intervals (and a line says so)."""
     from pneu_control.sysid.fit import refit, with_replicate
-    from pneu_control.sysid.replicate import replicate_records
+    from pneu_control.sysid.replicate import REPLICATES, replicate_records
 
     t0 = time.perf_counter()
     twin = base
@@ -295,16 +301,25 @@ def _replicated(base, fits: dict[str, AxisFit], recs, noise, options, log) -> di
         twin = model.apply(twin, params, fit.value)
     twin = _with_noise(twin, noise)
     records = list({id(r): r for rs in recs.values() for r in rs}.values())
-    reps = replicate_records(records, tuple(fits), twin)
+    draws = [replicate_records(records, tuple(fits), twin, k) for k in range(REPLICATES)]
+    log(
+        f"  replicates: {REPLICATES} excitations of the identified twin, {time.perf_counter() - t0:.0f} s"
+    )
     out = {}
     fitted_base = base  # the rotary fit started from the cylinder's values, as identify's did
     for axis, fit in fits.items():
-        mine = [r for r in reps if axis in r.designs]
-        if not mine:
+        mine = [[r for r in reps if axis in r.designs] for reps in draws]
+        if not all(mine):
             log(f"  {axis}: no design in the bags: intervals from the fit alone (no replicate)")
             out[axis] = fit
         else:
-            out[axis] = with_replicate(fit, refit(axis, fitted_base, mine, fit, options))
+            t1 = time.perf_counter()
+            again = [refit(axis, fitted_base, m, fit, options) for m in mine]
+            log(
+                f"  {axis}: fitted again on each: {time.perf_counter() - t1:.0f} s, "
+                + ", ".join(f"{a.nfev} steps" for a in again)
+            )
+            out[axis] = with_replicate(fit, again)
         fitted_base = _taken(fitted_base, fit, [])
     log(
         "  replicate on the identified twin (excited and fitted again): "
