@@ -272,13 +272,17 @@ def _with_noise(plant, noise: dict[str, NoiseEstimate]):
 
 
 def _taken(plant, fit: AxisFit, kept: list[str]):
-    """``plant`` with the values of ``fit`` whose 95 % interval is within
-    :data:`UNIDENTIFIABLE` (of the value; of the width for a linear parameter); the names of
-    the others appended to ``kept``."""
+    """``plant`` with the values of ``fit`` whose 1.96 σ is within :data:`UNIDENTIFIABLE` (of
+    the value; of the width for a linear parameter); the names of the others appended to
+    ``kept``."""
     params = [p for p in model.AXIS_PARAMS[fit.axis] if p.name in fit.names]
     take = []
     for i, p in enumerate(params):
-        rel = fit.ci95(i) / p.width if p.transform == "lin" else fit.rel_ci95(i)
+        # judged on the estimated scatter (1.96 σ), not on the interval's t quantile, which
+        # also carries how few bootstrap draws that estimate rests on
+        half = 1.96 * fit.sigma[i]
+        v = fit.value[i]
+        rel = half / p.width if p.transform == "lin" else (half / abs(v) if v else math.inf)
         if not math.isfinite(rel) or rel > UNIDENTIFIABLE:
             kept.append(p.name)
         else:
