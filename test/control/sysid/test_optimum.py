@@ -42,7 +42,10 @@ def record(plants, tmp_path_factory):
 @pytest.mark.parametrize(
     ("axis", "tolerance"),
     [
-        ("rotary", {"rotary.J_m": 0.05, "rotary.M_c": 0.10, "rotary.M_v": 0.05, "rotary.A_ex": 0.10}),
+        (
+            "rotary",
+            {"rotary.J_m": 0.05, "rotary.M_c": 0.10, "rotary.M_v": 0.05, "rotary.A_ex": 0.10},
+        ),
         ("linear", {"linear.A_f": 0.05, "linear.c_v": 0.05}),
     ],
 )
@@ -65,9 +68,11 @@ def test_the_per_segment_check_finds_the_segments_a_wrong_leakage_misses(plants,
     _, truth = plants
     names = tuple(p.name for p in model.AXIS_PARAMS["rotary"])
     opts = fit.FitOptions()
-    problem = fit._Problem("rotary", truth, [record], replace(opts, params=names))
+    problem = fit.Problem("rotary", truth, [record], replace(opts, params=names))
     # the true values and the pressure sensor's offset as the data show it
-    sensor = fit._Problem("rotary", truth, [record], replace(opts, params=())).solve(None, lambda _m: None)
+    sensor = fit.Problem("rotary", truth, [record], replace(opts, params=())).solve(
+        None, lambda _m: None
+    )
     offs = {f"offset:{r}:{k}": v for r, o in sensor.offsets.items() for k, v in o.items()}
     right = groups.check_segments(problem, problem.z_start(offs))
     assert not right.unexplained, right.lines("rotary")

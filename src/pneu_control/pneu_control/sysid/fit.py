@@ -40,7 +40,7 @@ import numpy as np
 from pneu_control.sysid import model, shooting, starts
 from pneu_control.sysid.record import AXIS_SIGNALS, Record
 
-__all__ = ["AxisFit", "FitOptions", "fit_axis", "refit", "with_replicate"]
+__all__ = ["AxisFit", "FitOptions", "Problem", "fit_axis", "refit", "with_replicate"]
 
 _OFFSET_WIDTH = 5e3  # Pa: z = 1 is one Huba accuracy band
 # Huba 511: ±0.5 % FS = ±5 kPa; the bound allows 1.5x that, so an offset cannot
@@ -151,7 +151,7 @@ def fit_axis(
 
     options = options or FitOptions()
     fit = _staged_fit(axis, base, records, options, log, stage)
-    full = _Problem(axis, base, records, replace(options, params=tuple(fit.names)))
+    full = Problem(axis, base, records, replace(options, params=tuple(fit.names)))
     check = groups.check_segments(full, full.z_start(_start_of(fit)))
     start = groups.refit_unexplained(axis, base, records, options, fit, check, log)
     if start is not None:
@@ -201,7 +201,7 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
     """
     names = options.params or tuple(p.name for p in model.AXIS_PARAMS[axis])
     first = tuple(n for n in names if n.startswith("valve_") and n.split(".")[1] in _STAGE1)
-    full = _Problem(axis, base, records, replace(options, params=names))
+    full = Problem(axis, base, records, replace(options, params=names))
     if not {f"{'valve_' + axis}.Q_n", f"valve_{axis}.{model.DEAD_BAND}"} <= set(first):
         return full.solve(None, log)
     stage()
@@ -215,7 +215,7 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
     if mech:  # the rest settles around the pinned mechanics first, then everything moves
         for group in _settling_groups(axis, names, mech):
             log(f"  {axis}: stage 2a, {', '.join(group)} (the mechanics pinned)")
-            held = _Problem(axis, base1, records, replace(options, params=group)).solve(start, log)
+            held = Problem(axis, base1, records, replace(options, params=group)).solve(start, log)
             start = {**start, **_start_of(held)}
     start.update(mech)
     stage()
@@ -246,7 +246,7 @@ def refit(axis: str, base, records: list[Record], fit: AxisFit, options: FitOpti
     """The least squares of ``fit``'s parameters on other ``records``, from ``fit``'s values
     (the offsets from 0): the stage-2 fit alone, as :func:`fit_axis` ends."""
     options = replace(options or FitOptions(), params=tuple(fit.names))
-    problem = _Problem(axis, base, records, options)
+    problem = Problem(axis, base, records, options)
     return problem.solve(dict(zip(fit.names, fit.value)), lambda _m: None)
 
 
@@ -271,8 +271,8 @@ def with_replicate(fit: AxisFit, draws: list[AxisFit]) -> AxisFit:
 
 def _flow_curve_start(axis, base, records, options, first, offsets, log):
     """Stage 1 on ``base``: the start values of the flow curve (and offsets) and their cost."""
-    long_ = _Problem(axis, base, records, replace(options, params=first))
-    short = _Problem(
+    long_ = Problem(axis, base, records, replace(options, params=first))
+    short = Problem(
         axis,
         base,
         records,
@@ -289,8 +289,9 @@ def _flow_curve_start(axis, base, records, options, first, offsets, log):
 _STAGE1 = ("Q_n", model.DEAD_BAND, "leak_fraction")
 
 
-class _Problem:
-    """The least-squares problem of one axis: parameters (as z), residuals, solve, statistics."""
+class Problem:
+    """The least-squares problem of one axis: parameters (as z), residuals, solve, statistics
+    (also what the per-segment check of :mod:`pneu_control.sysid.groups` replays)."""
 
     def __init__(
         self,
@@ -519,7 +520,7 @@ def _segment_sandwich(
 
 
 def _scan_dead_band(
-    long_: _Problem, short: _Problem, log: Callable[[str], None], offsets: dict[str, float]
+    long_: Problem, short: Problem, log: Callable[[str], None], offsets: dict[str, float]
 ) -> tuple[np.ndarray, float]:
     """The flow curve's start: the dead band by a scan along the cost's valley.
 

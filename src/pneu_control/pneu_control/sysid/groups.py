@@ -58,7 +58,7 @@ class Check:
 
 
 def check_segments(problem, z: np.ndarray) -> Check:
-    """The per-segment costs of ``problem`` (:class:`pneu_control.sysid.fit._Problem`) at ``z``."""
+    """The per-segment costs of ``problem`` (:class:`pneu_control.sysid.fit.Problem`) at ``z``."""
     r = problem.residuals(z)
     cost = 0.5 * np.bincount(problem.cluster, r * r, problem.n_clusters)
     rows = []
@@ -81,7 +81,7 @@ def refit_unexplained(
     """A start for the whole fit where the unexplained segments of ``check`` point: every
     parameter fitted on their design segments alone from ``fit``'s values and offsets; None
     when every segment is explained."""
-    from pneu_control.sysid.fit import _Problem
+    from pneu_control.sysid.fit import Problem
 
     if not check.unexplained:
         return None
@@ -103,7 +103,7 @@ def refit_unexplained(
     start.update({f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()})
     opts = replace(options, params=tuple(fit.names))
     try:
-        subs = [_Problem(axis, base, [r], opts, select=sel) for r, sel in picked]
+        subs = [Problem(axis, base, [r], opts, select=sel) for r, sel in picked]
     except ValueError:
         return None
     # one problem over all the picked records: their residuals side by side

@@ -3,11 +3,11 @@
 The linearised interval of a fit (the segment sandwich of
 :mod:`pneu_control.sysid.fit`) measures how far noise and start errors move
 the optimum to first order. Measured over noise seeds on a plant of the
-model's own family (docs/sysid-study.md), the estimator scatters 5-15 times
-more than that on the motor's flow scale, supply, leakages and Coulomb
-torque (why is not established: the cost is not smooth where the motor
-sticks and creeps at 5 V, and a start error runs through a whole replay).
-What the estimator does on this experiment, the identified twin shows too
+model's own family (docs/calibration.md, the intervals), the estimator
+scatters 3-16 times more than that on the motor's flow scale, supply,
+leakages and Coulomb torque (why is not established: the cost is not smooth
+where the motor sticks and creeps at 5 V, and a start error runs through a
+whole replay). What the estimator does on this experiment, the identified twin shows too
 (Efron & Tibshirani, *An Introduction to the Bootstrap*, 1993, ch. 6: the
 parametric bootstrap): each recorded design runs again on the identified
 twin (its values and noise, a new seed: new noise and sensor offsets), the
