@@ -8,7 +8,8 @@ For each plant (perturbed in the model's family, or STRUCTURAL: a form the twin 
 excitation bags (seed S for identify, S + 1 held out), identify, validate; per value the error
 against the truth and its stated tolerance and whether the 95 % interval covers the truth; per
 signal the held-out fit. Writes <out>/<plant>/study.json, <out>/study.md (one section per plant),
-<out>/summary.md (one row per plant) and <out>/coverage.md (per value, over the plants).
+<out>/summary.md (one row per plant), <out>/coverage.md (per value, over the plants) and
+<out>/calibration_tables.md (the tables of docs/calibration.md).
 --tables-only rebuilds the tables from the study.json files already in <out>. Same arguments,
 same tables (the twin and the fit are deterministic). The CI-fast version is test/control/sysid.
 """
@@ -103,6 +104,69 @@ def _coverage(results: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _cell(p: dict) -> str:
+    """An error as the calibration table shows it: relative in %, absolute in the unit; ✗ where
+    the 95 % interval misses the truth; kept (n.i.) where identify kept the base."""
+    if not p["taken"]:
+        return "kept (n.i.)"
+    e = f"{100 * p['error']:+.1f} %" if p["tolerance"][0] == "rel" else f"{p['error']:+.3f}"
+    return e if p["covered"] else e + " ✗"
+
+
+def _calibration(results: list[dict]) -> str:
+    """The tables docs/calibration.md quotes: errors per value and plant (✗: not covered), then
+    per plant the perturbed values, the rest, the held-out fit and the times."""
+    by = {r["plant"]: r for r in results}
+    plants = [n for n in PERTURBATIONS if n in by]
+    head = "| parameter (tolerance) | " + " | ".join(plants) + " |"
+    lines = [head, "|---|" + "---|" * len(plants)]
+    names: list[str] = []
+    for r in results:
+        names += [p["name"] for p in r["parameters"] if p["name"] not in names]
+    for n in names:
+        any_p = next(p for r in results for p in r["parameters"] if p["name"] == n)
+        kind, tol = any_p["tolerance"]
+        label = f"{n} (±{100 * tol:g} %)" if kind == "rel" else f"{n} (±{tol:g})"
+        cells = []
+        for plant in plants:
+            p = next((p for p in by[plant]["parameters"] if p["name"] == n), None)
+            cells.append("—" if p is None else _cell(p))
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "| plant | perturbed: truth → identified | other taken values within tolerance (worst) | "
+        "held-out fit % x / p_c1 / p_c2 / p_m1 / ω | excite (1 bag) + identify, s |",
+        "|---|---|---|---|---|",
+    ]
+    for plant in plants:
+        r = by[plant]
+        keys = {k.replace("du_table", "dead_band") for k in PERTURBATIONS[plant]}
+        hit = [p for p in r["parameters"] if p["name"] in keys]
+        if hit:
+            cells = "; ".join(
+                f"{p['name']} {p['truth']:.4g} → {p['identified']:.4g} ({_cell(p)})" for p in hit
+            )
+        else:
+            cells = "not fitted: " + ", ".join(sorted(PERTURBATIONS[plant]))
+        rest = [p for p in r["parameters"] if p not in hit and p["taken"]]
+        worst = max(rest, key=lambda p: abs(p["error"]) / p["tolerance"][1], default=None)
+        w = f" ({worst['name']} {_cell(worst)})" if worst else ""
+        held = next(v for v in r["validation"] if v["held_out"])
+        fits = " / ".join(f"{held['fit_percent'].get(k, float('nan')):.1f}" for k in _SIG)
+        t = r["times_s"]
+        lines.append(
+            f"| {plant} | {cells} | {sum(p['within'] for p in rest)}/{len(rest)}{w} | {fits} | "
+            f"{t.get('excite (2 bags)', 0) / 2:.0f} + {t.get('identify', 0):.0f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _write(out: Path, results: list[dict]) -> None:
+    (out / "summary.md").write_text(_summary(results))
+    (out / "coverage.md").write_text(_coverage(results))
+    (out / "calibration_tables.md").write_text(_calibration(results))
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--level", choices=("full", "quick"), default="full")
@@ -129,15 +193,14 @@ def main() -> int:
         results.append(json.loads(path.read_text()))
         parts.append(res.markdown())
         (out / "study.md").write_text("\n".join(parts))
-        (out / "summary.md").write_text(_summary(results))
-        (out / "coverage.md").write_text(_coverage(results))
+        _write(out, results)
         print(
             f"   {len(res.failures())} value(s) outside tolerance; {res.times_s}", file=sys.stderr
         )
-    (out / "summary.md").write_text(_summary(results))
-    (out / "coverage.md").write_text(_coverage(results))
+    _write(out, results)
     print(
-        f"wrote {out}/summary.md, coverage.md in {time.perf_counter() - t_all:.0f} s",
+        f"wrote {out}/summary.md, coverage.md, calibration_tables.md in "
+        f"{time.perf_counter() - t_all:.0f} s",
         file=sys.stderr,
     )
     return 0

@@ -199,7 +199,8 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
     fitted (stage()
     fitted (stage 2 again if it finds a lower cost elsewhere).
     """
-    names = options.params or tuple(p.name for p in model.AXIS_PARAMS[axis])
+    mine = tuple(p.name for p in model.AXIS_PARAMS[axis])
+    names = tuple(n for n in options.params if n in mine) if options.params else mine
     first = tuple(n for n in names if n.startswith("valve_") and n.split(".")[1] in _STAGE1)
     full = Problem(axis, base, records, replace(options, params=names))
     if not {f"{'valve_' + axis}.Q_n", f"valve_{axis}.{model.DEAD_BAND}"} <= set(first):
