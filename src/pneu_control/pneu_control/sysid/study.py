@@ -111,7 +111,9 @@ TOLERANCE: dict[str, tuple[str, float]] = {
     "rotary.V_m2": ("rel", 0.50),
     "rotary.A_ex": ("rel", 0.20),
     "rotary.k_leak": ("rel", 0.20),
-    "supply.p_s_rotary": ("rel", 0.03),
+    # measured: the estimate scatters 1.7-2.0 % (1 σ) over noise seeds on one quick experiment
+    # of an in-model motor (docs/calibration.md, the intervals); 3 % was 1.5 σ
+    "supply.p_s_rotary": ("rel", 0.05),
     "noise.x": ("rel", 0.15),
     "noise.p": ("rel", 0.15),
 }
