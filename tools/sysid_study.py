@@ -116,11 +116,13 @@ def _coverage(results: list[dict]) -> str:
 
 
 def _cell(p: dict) -> str:
-    """An error as the calibration table shows it: relative in %, absolute in the unit; ✗ where
-    the 95 % interval misses the truth; kept (n.i.) where identify kept the base."""
+    """An error as the calibration table shows it: relative in %, absolute in the unit; bold
+    outside its tolerance; ✗ where the 95 % interval misses the truth; kept (n.i.) where
+    identify kept the base."""
     if not p["taken"]:
         return "kept (n.i.)"
     e = f"{100 * p['error']:+.1f} %" if p["tolerance"][0] == "rel" else f"{p['error']:+.3f}"
+    e = e if p["within"] else f"**{e}**"
     return e if p["covered"] else e + " ✗"
 
 
