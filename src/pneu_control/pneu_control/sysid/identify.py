@@ -108,6 +108,12 @@ class Identification:
                     "status": f.status,
                     "correlation": f.corr.tolist(),
                     "names": f.names,
+                    "q95": f.q95,
+                    "sigma_fit": f.sigma_fit,
+                    "replicate_rms_shift": f.replicate_shift,
+                    "sigma_iid": f.sigma_iid,
+                    "segments": f.n_clusters,
+                    "unexplained": f.unexplained,
                 }
                 for a, f in self.fits.items()
             },
