@@ -30,6 +30,13 @@ CASES = {
     ],
     # the valves: shifted flow curve and twice the centre leakage, a near-isothermal process
     "flow+leakage+n1.05": ["flow curve shifted", "leakage x2", "n = 1.05"],
+    # inertia, friction and volume together on the motor (issue 21's plant B: found as J_m
+    # +49 %, Q_n -46 %, p_s +56 % before the equation-error starts), friction and leakage on
+    # the cylinder
+    "motorJ+Mc+Vm1+cylinderAf+cv+leak": [
+        "motor J_m x1.5, M_c x0.6, V_m1 x1.6",
+        "cylinder A_f x1.3, c_v x0.75, leak x1.5",
+    ],
 }
 MIN_FIT = 90.0
 # Reached on every signal but one: with the supply read as absolute (a 1 bar gauge supply on

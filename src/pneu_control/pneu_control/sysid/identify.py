@@ -1,7 +1,7 @@
 """From bags to a calibrated plant.yaml: noise from quiet segments, the output-error fits, the file.
 
-Order: the sensor noise (first differences in the quiet segments: a robust
-σ = 1.4826·MAD(Δy)/√2, blind to slow drifts), then the cylinder (which also
+Order: the sensor noise (first differences in the quiet segments: their
+standard deviation within 5 robust σ of the median, /√2, blind to slow drifts), then the cylinder (which also
 fixes the polytropic index), then the motor with that index. Each fitted
 value goes into a copy of the base plant.yaml tree -- every other leaf and
 every key of a leaf (unit, source, and any optional key such as a ``range``)
@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -107,6 +108,12 @@ class Identification:
                     "status": f.status,
                     "correlation": f.corr.tolist(),
                     "names": f.names,
+                    "q95": f.q95,
+                    "sigma_fit": f.sigma_fit,
+                    "replicate_rms_shift": f.replicate_shift,
+                    "sigma_iid": f.sigma_iid,
+                    "segments": f.n_clusters,
+                    "unexplained": f.unexplained,
                 }
                 for a, f in self.fits.items()
             },
@@ -162,8 +169,13 @@ def estimate_noise(records: list[Record], axes: tuple[str, ...]) -> dict[str, No
             d = np.concatenate(diffs) if diffs else np.zeros(0)
             if len(d) < 50:
                 continue
-            mad = float(np.median(np.abs(d - np.median(d))))
-            out[name] = NoiseEstimate(name, 1.4826 * mad / math.sqrt(2.0), len(d))
+            # the standard deviation of the differences within 5 robust σ of their median: as
+            # robust as the MAD against a step or a spike, but not quantised with the AI's
+            # steps (the MAD of 16-bit pressure readings moves in 8 % steps of σ)
+            med = float(np.median(d))
+            mad = float(np.median(np.abs(d - med)))
+            kept = d[np.abs(d - med) <= 5.0 * 1.4826 * mad] if mad > 0 else d
+            out[name] = NoiseEstimate(name, float(np.std(kept)) / math.sqrt(2.0), len(kept))
     return out
 
 
@@ -188,10 +200,12 @@ def identify(
     options: FitOptions | None = None,
     log: Callable[[str], None] = print,
     progress: Callable[[int, int], None] | None = None,
+    replicate: bool = True,
 ) -> Identification:
     """Identify ``base`` (PlantParams) from ``records``; see the module docstring.
 
-    ``progress(done, total)``: fit stages begun of at most ``STAGES`` per axis."""
+    ``progress(done, total)``: fit stages begun of at most ``STAGES`` per axis. ``replicate``:
+    widen the intervals by a parametric-bootstrap draw (:mod:`pneu_control.sysid.replicate`)."""
     options = options or FitOptions()
     axes = axes or excited_axes(records)
     if not axes:
@@ -209,43 +223,35 @@ def identify(
         if progress is not None:
             progress(done[0], total)
 
+    recs = {}
     for i, axis in enumerate(a for a in ("linear", "rotary") if a in axes):
-        recs = _excited(records, axis)
-        log(f"{axis}: fitting {len(model.AXIS_PARAMS[axis])} parameters to {len(recs)} bag(s)")
+        recs[axis] = _excited(records, axis)
+        log(
+            f"{axis}: fitting {len(model.AXIS_PARAMS[axis])} parameters to {len(recs[axis])} bag(s)"
+        )
         done[0] = STAGES * i
-        fit = fit_axis(axis, plant, recs, options, log=log, stage=stage)
+        fit = fit_axis(axis, plant, recs[axis], options, log=log, stage=stage)
         done[0] = STAGES * (i + 1)
         if progress is not None:
             progress(done[0], total)
         fits[axis] = fit
-        params = [p for p in model.AXIS_PARAMS[axis] if p.name in fit.names]
-        take = []
-        for i, p in enumerate(params):
-            rel = fit.ci95(i) / p.width if p.transform == "lin" else fit.rel_ci95(i)
-            if not math.isfinite(rel) or rel > UNIDENTIFIABLE:
-                kept.append(p.name)
-            else:
-                take.append(i)
-        plant = model.apply(plant, [params[i] for i in take], [fit.value[i] for i in take])
+        plant = _taken(plant, fit, [])
         log(
             f"{axis}: cost {fit.cost_start:.4g} -> {fit.cost:.4g} in {fit.nfev} steps, "
             f"{fit.wall_s:.0f} s"
         )
+    if replicate:
+        fits = _replicated(base, fits, recs, noise, options, log)
+    plant = base
+    for fit in fits.values():
+        plant = _taken(plant, fit, kept)
+        notes.extend(fit.unexplained)
     if "rotary" in axes and "linear" not in axes:
         notes.append(
             "ambient.n_poly not fitted: on the motor it only appears as n/V (fixed volumes); "
             "the cylinder's moving piston separates it"
         )
-    from pneu_msgs_py.params.core import with_updates
-
-    upd = {}
-    s = base.sensors
-    if "x" in noise:
-        upd["sensors.laser.sigma_m"] = noise["x"].sigma
-    pn = [noise[k].sigma for k in ("p_c1", "p_c2", "p_m1") if k in noise]
-    if pn:
-        upd["sensors.pressure.sigma_v"] = float(np.mean(pn)) * s.pressure.v_fs / s.pressure.fs
-    plant = with_updates(plant, upd)
+    plant = _with_noise(plant, noise)
     return Identification(
         base=base,
         plant=plant,
@@ -255,6 +261,81 @@ def identify(
         kept_base=kept,
         notes=notes,
     )
+
+
+def _with_noise(plant, noise: dict[str, NoiseEstimate]):
+    """``plant`` with the sensor noise σ measured in the quiet segments."""
+    from pneu_msgs_py.params.core import with_updates
+
+    upd = {}
+    s = plant.sensors
+    if "x" in noise:
+        upd["sensors.laser.sigma_m"] = noise["x"].sigma
+    pn = [noise[k].sigma for k in ("p_c1", "p_c2", "p_m1") if k in noise]
+    if pn:
+        upd["sensors.pressure.sigma_v"] = float(np.mean(pn)) * s.pressure.v_fs / s.pressure.fs
+    return with_updates(plant, upd)
+
+
+def _taken(plant, fit: AxisFit, kept: list[str]):
+    """``plant`` with the values of ``fit`` whose 1.96 σ is within :data:`UNIDENTIFIABLE` (of
+    the value; of the width for a linear parameter); the names of the others appended to
+    ``kept``."""
+    params = [p for p in model.AXIS_PARAMS[fit.axis] if p.name in fit.names]
+    take = []
+    for i, p in enumerate(params):
+        # judged on the estimated scatter (1.96 σ), not on the interval's t quantile, which
+        # also carries how few bootstrap draws that estimate rests on
+        half = 1.96 * fit.sigma[i]
+        v = fit.value[i]
+        rel = half / p.width if p.transform == "lin" else (half / abs(v) if v else math.inf)
+        if not math.isfinite(rel) or rel > UNIDENTIFIABLE:
+            kept.append(p.name)
+        else:
+            take.append(i)
+    return model.apply(plant, [params[i] for i in take], [fit.value[i] for i in take])
+
+
+def _replicated(base, fits: dict[str, AxisFit], recs, noise, options, log) -> dict[str, AxisFit]:
+    """``fits`` with their parametric-bootstrap draw (:mod:`pneu_control.sysid.replicate`):
+    the bags' designs run once more on the identified twin (every fitted value, the
+    measured noise), each axis fitted again from its values; an axis without a design in
+    its bags keeps its fit's intervals (and a line says so)."""
+    from pneu_control.sysid.fit import refit, with_replicate
+    from pneu_control.sysid.replicate import REPLICATES, replicate_records
+
+    t0 = time.perf_counter()
+    twin = base
+    for fit in fits.values():
+        params = tuple(p for p in model.AXIS_PARAMS[fit.axis] if p.name in fit.names)
+        twin = model.apply(twin, params, fit.value)
+    twin = _with_noise(twin, noise)
+    records = list({id(r): r for rs in recs.values() for r in rs}.values())
+    draws = [replicate_records(records, tuple(fits), twin, k) for k in range(REPLICATES)]
+    log(
+        f"  replicates: {REPLICATES} excitations of the identified twin, {time.perf_counter() - t0:.0f} s"
+    )
+    out = {}
+    fitted_base = base  # the rotary fit started from the cylinder's values, as identify's did
+    for axis, fit in fits.items():
+        mine = [[r for r in reps if axis in r.designs] for reps in draws]
+        if not all(mine):
+            log(f"  {axis}: no design in the bags: intervals from the fit alone (no replicate)")
+            out[axis] = fit
+        else:
+            t1 = time.perf_counter()
+            again = [refit(axis, fitted_base, m, fit, options) for m in mine]
+            log(
+                f"  {axis}: fitted again on each: {time.perf_counter() - t1:.0f} s, "
+                + ", ".join(f"{a.nfev} steps" for a in again)
+            )
+            out[axis] = with_replicate(fit, again)
+        fitted_base = _taken(fitted_base, fit, [])
+    log(
+        "  replicate on the identified twin (excited and fitted again): "
+        f"{time.perf_counter() - t0:.0f} s"
+    )
+    return out
 
 
 def _core_leaves(tree: Any) -> Any:

@@ -1,10 +1,14 @@
 """Proof on known plants: perturbed twins, hidden from the identifier, identified and scored.
 
-A study of one perturbed plant: run the excitation on it (seed 0: the bag
-``pneu identify`` sees; seed 1: a held-out bag with other pulse orders,
+A study of one perturbed plant: run the excitation on it (seed s: the bag
+``pneu identify`` sees; seed s + 1: a held-out bag with other pulse orders,
 amplitudes, PRBS sequences, noise and sensor offsets), identify from the
 first bag alone starting from the base plant, validate on both, and compare
-every taken value with the truth against :data:`TOLERANCE`. The identifier
+every taken value with the truth against :data:`TOLERANCE` and its 95 %
+interval (does it cover the truth?). :data:`STRUCTURAL` plants differ from
+the twin in what it cannot fit (a valve curve's shape, the Stribeck width,
+a sensor lag, the flow law's pressure ratio, the axis coupling, Table 1's
+dead volumes): their shared values are still scored. The identifier
 only ever gets the bags (written with ``hide_plant``); the truth is used
 here, after the fact.
 """
@@ -19,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from pneu_msgs_py.params.core import flatten, with_updates
+from pneu_sim.physics.params import K_SEAL_ESTIMATE
 
 from pneu_control.sysid import model
 from pneu_control.sysid.excite import excitation_spec, run_excitation
@@ -26,7 +31,14 @@ from pneu_control.sysid.identify import Identification, identify
 from pneu_control.sysid.record import load_record
 from pneu_control.sysid.validate import BagValidation, validate_record
 
-__all__ = ["PERTURBATIONS", "TOLERANCE", "StudyResult", "perturbed_plant", "study_plant"]
+__all__ = [
+    "PERTURBATIONS",
+    "STRUCTURAL",
+    "TOLERANCE",
+    "StudyResult",
+    "perturbed_plant",
+    "study_plant",
+]
 
 
 # name -> {dotted key: function(base value or base PlantParams group) -> true value}
@@ -49,7 +61,35 @@ PERTURBATIONS: dict[str, dict[str, Callable[[Any], Any]]] = {
         "supply.p_s_linear": lambda v: 0.2e6,
         "supply.p_s_rotary": lambda v: 0.4e6,
     },
+    # several values at once, compensating (issue 21's plant B motor: J_m, M_c, V_m1)
+    "motor J_m x1.5, M_c x0.6, V_m1 x1.6": {
+        "rotary.J_m": lambda v: 1.5 * v,
+        "rotary.M_c": lambda v: 0.6 * v,
+        "rotary.V_m1": lambda v: 1.6 * v,
+    },
+    "cylinder A_f x1.3, c_v x0.75, leak x1.5": {
+        "linear.A_f": lambda v: 1.3 * v,
+        "linear.c_v": lambda v: 0.75 * v,
+        "valve_linear.leak_fraction": lambda v: 1.5 * v,
+    },
+    # structural mismatch (STRUCTURAL): the twin's model cannot take these values
+    "valve #1 curve of another shape": {  # more flow near the null: f^0.7 of the chart's
+        "valve_linear.flow_table": lambda t: tuple(float(f) ** 0.7 for f in t),
+    },
+    "Stribeck dip 3x wider": {"linear.v_s": lambda v: 3.0 * v},
+    "pressure sensor lag 5 ms": {"sensors.pressure.tau": lambda v: 0.005},
+    "flow law b = 0.4 (pressure dependence of flow and leaks)": {
+        "valve_linear.b": lambda v: 0.4,
+        "valve_rotary.b": lambda v: 0.4,
+    },
+    "axis coupling on (seal torque)": {"coupling.k_seal": lambda v: K_SEAL_ESTIMATE},
+    "dead volumes x1.3": {
+        "linear.V_1d": lambda v: 1.3 * v,
+        "linear.V_2d": lambda v: 1.3 * v,
+    },
 }
+# plants the model's family does not contain (a fixed value or a form the fit cannot change)
+STRUCTURAL = frozenset(list(PERTURBATIONS)[-6:])
 
 # stated tolerance per identified parameter: ("rel", fraction) or ("abs", value in its unit)
 TOLERANCE: dict[str, tuple[str, float]] = {
@@ -71,7 +111,9 @@ TOLERANCE: dict[str, tuple[str, float]] = {
     "rotary.V_m2": ("rel", 0.50),
     "rotary.A_ex": ("rel", 0.20),
     "rotary.k_leak": ("rel", 0.20),
-    "supply.p_s_rotary": ("rel", 0.03),
+    # measured: the estimate scatters 1.7-2.0 % (1 σ) over noise seeds on one quick experiment
+    # of an in-model motor (docs/calibration.md, the intervals); 3 % was 1.5 σ
+    "supply.p_s_rotary": ("rel", 0.05),
     "noise.x": ("rel", 0.15),
     "noise.p": ("rel", 0.15),
 }
@@ -120,6 +162,11 @@ class Row:
         """Is the error inside the tolerance?"""
         return abs(self.error) <= self.tol[1]
 
+    @property
+    def covered(self) -> bool:
+        """Does the 95 % interval contain the truth?"""
+        return abs(self.value - self.truth) <= self.ci95
+
     def to_dict(self) -> dict[str, Any]:
         """The row as plain data."""
         return {
@@ -132,6 +179,7 @@ class Row:
             "error": self.error,
             "tolerance": list(self.tol),
             "within": self.ok,
+            "covered": self.covered,
         }
 
 
@@ -159,6 +207,8 @@ class StudyResult:
             "parameters": [r.to_dict() for r in self.rows],
             "validation": [v.to_dict() for v in self.validations],
             "correlated": {a: f.correlated_pairs() for a, f in self.ident.fits.items()},
+            "notes": list(self.ident.notes),
+            "structural": self.plant in STRUCTURAL,
             "times_s": self.times_s,
         }
 
@@ -167,16 +217,17 @@ class StudyResult:
         lines = [
             f"#### {self.plant}",
             "",
-            "| parameter | truth | base | identified | 95 % CI | error | tolerance | within |",
-            "|---|---|---|---|---|---|---|---|",
+            "| parameter | truth | base | identified | 95 % CI | error | tolerance | within | covered |",
+            "|---|---|---|---|---|---|---|---|---|",
         ]
         for r in self.rows:
             err = f"{100 * r.error:+.1f} %" if r.tol[0] == "rel" else f"{r.error:+.3g}"
             tol = f"±{100 * r.tol[1]:.0f} %" if r.tol[0] == "rel" else f"±{r.tol[1]:g}"
             ok = ("yes" if r.ok else "**no**") if r.taken else "not identifiable (base kept)"
+            cov = "yes" if r.covered else "**no**"
             lines.append(
                 f"| {r.name} | {r.truth:.4g} | {r.base:.4g} | {r.value:.4g} | ±{r.ci95:.2g} | "
-                f"{err} | {tol} | {ok} |"
+                f"{err} | {tol} | {ok} | {cov} |"
             )
         lines += [
             "",
@@ -191,6 +242,8 @@ class StudyResult:
                 + " |"
             )
         t = ", ".join(f"{k} {v:.0f} s" for k, v in self.times_s.items())
+        lines += [""] + [f"- {n}" for n in self.ident.notes]
+        lines += [f"- {w}" for v in self.validations for w in v.warnings if v.held_out]
         lines += ["", f"wall times: {t}", ""]
         return "\n".join(lines)
 
@@ -234,17 +287,19 @@ def study_plant(
     level: str = "quick",
     axes: tuple[str, ...] = ("linear", "rotary"),
     log: Callable[[str], None] = print,
+    seed: int = 0,
 ) -> StudyResult:
-    """Excite the perturbed twin (seeds 0 and 1), identify from seed 0, validate on both."""
+    """Excite the perturbed twin (seeds ``seed`` and ``seed`` + 1), identify from the first,
+    validate on both."""
     label = names if isinstance(names, str) else " + ".join(names)
     truth = perturbed_plant(base, names)
     out = Path(out_dir)
     times: dict[str, float] = {}
     bags = []
     t0 = time.perf_counter()
-    for seed in (0, 1):
-        d = out / f"excite_seed{seed}"
-        spec = excitation_spec(axes, truth, seed=seed, level=level)
+    for sd in (seed, seed + 1):
+        d = out / f"excite_seed{sd}"
+        spec = excitation_spec(axes, truth, seed=sd, level=level)
         run_excitation(spec, d, progress=False, hide_plant=True)
         bags.append(d / "run.mcap")
     times["excite (2 bags)"] = time.perf_counter() - t0

@@ -37,6 +37,7 @@ __all__ = [
     "R_OM",
     "N_REPLAY",
     "exhaust_pressure",
+    "exhaust_pressures",
     "mean_vane_factor",
     "replay",
     "replay_params",
@@ -160,6 +161,24 @@ def exhaust_pressure(prm: np.ndarray, p_m1: float, omega: float, kbar: float) ->
     ``kbar``: :func:`mean_vane_factor`.
     """
     return float(_exhaust_pressure(prm, float(p_m1), float(omega), float(kbar)))
+
+
+def exhaust_pressures(
+    prm: np.ndarray, p_m1: np.ndarray, omega: np.ndarray, kbar: float
+) -> np.ndarray:
+    """:func:`exhaust_pressure` at each sample of the arrays ``p_m1`` (Pa abs) and ``omega``
+    (rad/s), in one compiled call (same bits as the scalar one)."""
+    p = np.ascontiguousarray(p_m1, dtype=np.float64)
+    w = np.ascontiguousarray(omega, dtype=np.float64)
+    out = np.empty(p.shape[0])
+    _exhaust_pressures(prm, p, w, float(kbar), out)
+    return out
+
+
+@njit(cache=True)
+def _exhaust_pressures(prm, p_m1, omega, kbar, out):
+    for i in range(p_m1.shape[0]):
+        out[i] = _exhaust_pressure(prm, p_m1[i], omega[i], kbar)
 
 
 @njit(cache=True)
