@@ -59,6 +59,7 @@ class FitOptions:
     params: tuple[str, ...] | None = None  # names to fit (default: every parameter of the axis)
     short_segment_s: float = 0.2  # the flow-curve stage's smooth cost (see _scan_dead_band)
     short_every: int = 3  # ... on every 3rd short segment
+    curve: bool = True  # last stage: the valve's own curve (pneu_control.sysid.curve)
 
 
 @dataclass
@@ -83,6 +84,8 @@ class AxisFit:
     n_residuals: int
     status: str
     plant: object = None  # the fitted PlantParams
+    fit_params: tuple = ()  # the FitParams of ``names`` (model.FitParam)
+    curve_support: object = None  # what the data inform of the valve's own curve (curve stage)
 
     def ci95(self, i: int) -> float:
         """95 % half-width of parameter ``i`` (1.96 σ), in its unit."""
@@ -121,7 +124,7 @@ def _autocorr_time(r: np.ndarray, max_lag: int = 200) -> float:
     return tau
 
 
-STAGES = 4  # flow curve, every parameter, and each once again (fit_axis)
+STAGES = 5  # flow curve, every parameter, each once again (fit_axis), the own curve
 
 
 def fit_axis(
@@ -132,9 +135,80 @@ def fit_axis(
     log: Callable[[str], None] = print,
     stage: Callable[[], None] = lambda: None,
 ) -> AxisFit:
-    """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``.
+    """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``: in the catalogue
+    curve's family first (:func:`_fit_catalogue_family`), then, with ``options.curve``, the
+    valve's own curve (:func:`_fit_own_curve`).
 
-    ``stage()`` is called as each of the (at most :data:`STAGES`) stages below begins.
+    ``stage()`` is called as each of the (at most :data:`STAGES`) stages begins.
+    """
+    options = options or FitOptions()
+    fit = _fit_catalogue_family(axis, base, records, options, log, stage)
+    names = options.params or tuple(p.name for p in model.AXIS_PARAMS[axis])
+    if not options.curve or f"valve_{axis}.Q_n" not in names:
+        return fit
+    stage()
+    return _fit_own_curve(axis, base, records, options, fit, log)
+
+
+def _fit_own_curve(axis, base, records, options, fit: AxisFit, log) -> AxisFit:
+    """The last stage: the valve's own monotone curve per port (knots where the data are,
+    :mod:`pneu_control.sysid.curve`) with every other parameter but the catalogue curve's
+    scale and dead band, from the catalogue-family fit ``fit``.
+
+    The catalogue family is a shift and a scale of one shape; a valve of another shape
+    near the null makes the leakage and friction stand in for the difference there. The
+    start is ``fit``'s curve itself (written on the chart's breakpoints), so this stage
+    only ever moves away from it where the data say so; it is kept when its cost is lower.
+    """
+    from pneu_control.sysid import curve
+
+    valve = f"valve_{axis}"
+    estimate = None
+    if axis == "linear":  # the chambers as flow meters: a direct measurement to start from
+        from pneu_control.sysid.valve_flow import estimate_curve
+
+        estimate = estimate_curve(fit.plant, records, fit.offsets)
+    start_plant = curve.own_curve_plant(fit.plant, axis, estimate)
+    knots, sup = curve.fit_params(axis, start_plant, records)
+    drop = {f"{valve}.Q_n", f"{valve}.{model.DEAD_BAND}"}
+    others = [n for n in fit.names if n not in drop]
+    log(
+        f"  {axis}: stage 3, the valve's own curve: {len(knots)} knots "
+        f"({sup.text()}) with {len(others)} other parameters"
+    )
+    prob = _Problem(
+        axis,
+        start_plant,
+        records,
+        replace(options, params=(*others, *(p.name for p in knots))),
+        extra=knots,
+    )
+    offs = {f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()}
+    own = prob.solve(offs, log)
+    if not own.cost < fit.cost:
+        log(f"  {axis}: own curve cost {own.cost:.5g} >= {fit.cost:.5g}: the catalogue family kept")
+        return fit
+    # the report's base column: the values identify started from, not this stage's start
+    own.base = [
+        own.base[i] if curve.is_handle(n) else model.base_value(base, own.fit_params[i])
+        for i, n in enumerate(own.names)
+    ]
+    own.cost_start = fit.cost_start
+    own.nfev += fit.nfev
+    own.wall_s += fit.wall_s
+    own.curve_support = sup
+    return own
+
+
+def _fit_catalogue_family(
+    axis: str,
+    base,
+    records: list[Record],
+    options: FitOptions,
+    log: Callable[[str], None],
+    stage: Callable[[], None],
+) -> AxisFit:
+    """The parameters with the valve's curve a shift and scale of the catalogue's.
 
     Stage 1: the valve's flow curve (scale and dead band: what sets the
     operating points, and what a start far off gets most wrong) by
@@ -142,10 +216,8 @@ def fit_axis(
     there -- otherwise the friction, supply and exhaust parameters absorb a
     wrong flow curve (a local minimum). When stage 2 moves the dead band away
     from the scan's pick, the scan runs again with the other parameters as
-    fitted (stage()
     fitted (stage 2 again if it finds a lower cost elsewhere).
     """
-    options = options or FitOptions()
     names = options.params or tuple(p.name for p in model.AXIS_PARAMS[axis])
     first = tuple(n for n in names if n.startswith("valve_") and n.split(".")[1] in _STAGE1)
     full = _Problem(axis, base, records, replace(options, params=names))
@@ -201,9 +273,18 @@ _STAGE1 = ("Q_n", model.DEAD_BAND, "leak_fraction")
 class _Problem:
     """The least-squares problem of one axis: parameters (as z), residuals, solve, statistics."""
 
-    def __init__(self, axis: str, base, records: list[Record], options: FitOptions, every: int = 1):
+    def __init__(
+        self,
+        axis: str,
+        base,
+        records: list[Record],
+        options: FitOptions,
+        every: int = 1,
+        extra: tuple[model.FitParam, ...] = (),
+    ):
         self.axis, self.base, self.options = axis, base, options
-        self.params = tuple(p for p in model.AXIS_PARAMS[axis] if p.name in options.params)
+        known = model.AXIS_PARAMS[axis] + tuple(extra)
+        self.params = tuple(p for p in known if p.name in options.params)
         self.p0 = [model.base_value(base, p) for p in self.params]
         bounds = []
         for p, b in zip(self.params, self.p0):
@@ -304,7 +385,9 @@ class _Problem:
             r = self.residuals(z)
             if n_eval[0] % (len(z) + 1) == 1:
                 vals, _ = self.unpack(z)
-                shown = ", ".join(f"{p.name.split('.')[-1]}={v:.4g}" for p, v in zip(params, vals))
+                shown = ", ".join(
+                    f"{p.name.split('.', 1)[-1]}={v:.4g}" for p, v in zip(params, vals)
+                )
                 log(
                     f"  {axis} eval {n_eval[0]:4d}  cost {0.5 * float(r @ r):.5g}  "
                     f"({time.perf_counter() - t0:.0f} s)  {shown}"
@@ -378,6 +461,7 @@ class _Problem:
             n_residuals=m_res,
             status=str(res.message),
             plant=model.apply(self.base, self.params, vals),
+            fit_params=self.params,
         )
 
 

@@ -79,7 +79,7 @@ class Identification:
                         "base": fit.base[i],
                         "value": fit.value[i],
                         "ci95": fit.ci95(i),
-                        "rel_ci95": fit.rel_ci95(i) if not name.endswith(".dead_band") else None,
+                        "rel_ci95": None if _absolute(name) else fit.rel_ci95(i),
                         "taken": name not in self.kept_base,
                     }
                 )
@@ -218,15 +218,19 @@ def identify(
         if progress is not None:
             progress(done[0], total)
         fits[axis] = fit
-        params = [p for p in model.AXIS_PARAMS[axis] if p.name in fit.names]
+        params = list(fit.fit_params)
         take = []
         for i, p in enumerate(params):
             rel = fit.ci95(i) / p.width if p.transform == "lin" else fit.rel_ci95(i)
+            if "@" in p.name:  # a curve knot: the curve is taken whole, below
+                continue
             if not math.isfinite(rel) or rel > UNIDENTIFIABLE:
                 kept.append(p.name)
             else:
                 take.append(i)
         plant = model.apply(plant, [params[i] for i in take], [fit.value[i] for i in take])
+        if fit.curve_support is not None:  # the valve's own curve, as fitted (its band reported)
+            plant = _with_curve_of(plant, fit.plant, fit.curve_support.valve)
         log(
             f"{axis}: cost {fit.cost_start:.4g} -> {fit.cost:.4g} in {fit.nfev} steps, "
             f"{fit.wall_s:.0f} s"
@@ -255,6 +259,20 @@ def identify(
         kept_base=kept,
         notes=notes,
     )
+
+
+def _with_curve_of(plant, fitted, valve: str):
+    """``plant`` with the curve (and its unit Q_n) of ``valve`` as in ``fitted``."""
+    from pneu_msgs_py.params.core import with_updates
+
+    v = getattr(fitted, valve)
+    leaves = ("Q_n", "u_curve", "flow_4", "flow_2")
+    return with_updates(plant, {f"{valve}.{k}": getattr(v, k) for k in leaves})
+
+
+def _absolute(name: str) -> bool:
+    """Is the interval of ``name`` reported in its unit (a dead band, a curve knot)?"""
+    return name.endswith("." + model.DEAD_BAND) or "@" in name
 
 
 def _core_leaves(tree: Any) -> Any:
@@ -305,7 +323,10 @@ def _identified_tree(ident: Identification, base_tree: dict, names: str) -> dict
     tree = copy.deepcopy(base_tree)
     values = flatten(ident.plant)
     for fit in ident.fits.values():
+        _set_own_curve(tree, fit, values, names)
         for i, name in enumerate(fit.names):
+            if "@" in name:
+                continue
             if name.endswith("." + model.DEAD_BAND):
                 leaf = name.split(".")[0] + ".du_table"
                 if name in ident.kept_base:
@@ -345,6 +366,37 @@ def _identified_tree(ident: Identification, base_tree: dict, names: str) -> dict
                 f"identified from the quiet segments of {names} (±{100 * rel:.2g} %)",
             )
     return tree
+
+
+def _set_own_curve(tree: dict, fit: AxisFit, values: dict, names: str) -> None:
+    """The valve's own curve of ``fit`` (if its last stage fitted one) into ``tree``, with its
+    provenance: what the data informed, the knots' 95 % band; Q_n becomes its unit."""
+    sup = fit.curve_support
+    if sup is None:
+        return
+    valve = sup.valve
+    band = max((fit.ci95(i) for i, n in enumerate(fit.names) if "@" in n), default=0.0)
+    src = (
+        f"identified from {names}: the valve's own curve, monotone per port, {sup.text()}; "
+        f"knots ±{band:.3f} of full flow at most (95 %)"
+    )
+    for leaf in ("u_curve", "flow_4", "flow_2"):
+        key = f"{valve}.{leaf}"
+        _set(tree, key, [float(v) for v in values[key]], src)
+    if sup.ports == ("4",):
+        _set(
+            tree,
+            f"{valve}.flow_2",
+            [float(v) for v in values[f"{valve}.flow_2"]],
+            src + "; port 2 unused by the plumbing: written as port 4's image (-flow_4)",
+        )
+    node = tree
+    for key in (valve, "Q_n"):
+        node = node[key]
+    node["source"] = (
+        f"the unit of the identified curve (u_curve, flow_4, flow_2: fractions of this "
+        f"nominal flow; {node.get('source', '')})"
+    )
 
 
 def write_plant(
