@@ -51,7 +51,7 @@ __all__ = [
     "updates",
 ]
 
-KNOTS_DV = (0.1, 0.25, 0.45, 0.7, 1.0, 1.4, 1.9, 2.6, 3.5, 5.0)  # V beyond a dead band's edge
+KNOTS_DV = (0.1, 0.25, 0.45, 0.7, 1.0, 1.4, 1.9, 2.6, 3.3, 4.0, 4.7)  # V beyond a dead band's edge
 MIN_SAMPLES = 100  # valid samples (0.1 s) between a knot and the next inward to fit it
 EDGE_FLOW = 2e-3  # g below which the start curve counts as inside its dead band
 _WIDTH_V = 0.05  # fit coordinate of the edges: z = 1 is 50 mV

@@ -118,7 +118,17 @@ class Identification:
         """The identification as Markdown: one table row per parameter and noise estimate, then
         the correlated pairs and each bag's pressure sensor offsets."""
         lines = ["| parameter | base | identified | 95 % CI | taken |", "|---|---|---|---|---|"]
+        for fit in self.fits.values():  # a valve's own curve: one row (its knots in the JSON)
+            if fit.curve_support is not None:
+                n = sum(1 for name in fit.names if "@" in name)
+                band = max(fit.ci95(i) for i, name in enumerate(fit.names) if "@" in name)
+                lines.append(
+                    f"| {fit.curve_support.valve} curve | catalogue | own, {n} values "
+                    f"({fit.curve_support.text()}) | ±{band:.3g} at most | yes |"
+                )
         for r in self.rows():
+            if "@" in r["name"]:
+                continue
             ci = (
                 f"±{r['ci95']:.3g} {r['unit']}"
                 if r["rel_ci95"] is None
@@ -135,6 +145,8 @@ class Identification:
             )
         for axis, f in self.fits.items():
             for a, b, rho in f.correlated_pairs():
+                if "@" in a and "@" in b:
+                    continue  # neighbouring knots of one curve trade by construction
                 lines.append(
                     f"\n{axis}: {a} and {b} correlated (ρ = {rho:+.3f}): not separately identifiable from these bags"
                 )
@@ -390,13 +402,16 @@ def _set_own_curve(tree: dict, fit: AxisFit, values: dict, names: str) -> None:
             [float(v) for v in values[f"{valve}.flow_2"]],
             src + "; port 2 unused by the plumbing: written as port 4's image (-flow_4)",
         )
-    node = tree
-    for key in (valve, "Q_n"):
-        node = node[key]
-    node["source"] = (
-        f"the unit of the identified curve (u_curve, flow_4, flow_2: fractions of this "
-        f"nominal flow; {node.get('source', '')})"
+    _set(
+        tree,
+        f"{valve}.Q_n",
+        float(values[f"{valve}.Q_n"]),
+        f"identified from {names}: the unit of the identified curve (u_curve, flow_4, flow_2 "
+        "are fractions of this nominal flow), the flow scale of the catalogue-shaped fit it "
+        "started from",
     )
+    node = tree[valve]["Q_n"]
+    node.pop("range", None)  # the catalogue's tolerance band is not this unit's uncertainty
 
 
 def write_plant(
