@@ -34,15 +34,16 @@ def _handles_at_start(start, rec):
 
 
 def test_start_values_reproduce_the_start_curve():
-    """At the start's own values the knots replay the catalogue within 1.5 % of full flow:
-    the edges are parameters, so a few knots carry the shape."""
+    """At the start's own values the parameters give the catalogue back (within 0.5 % of
+    full flow: only its first 70 mV, under 0.2 %, become the dead band): between knots the
+    curve keeps the start's shape."""
     start = PlantParams()
     rec = _record(np.linspace(2.0, 8.0, 60_000))
     params, sup, values = _handles_at_start(start, rec)
     assert {p.name for p in params} >= {"valve_linear.flow_4@null", "valve_linear.flow_2@band"}
     assert sup.knots[("4", "+")] >= 5 and sup.knots[("2", "-")] >= 5
     plant = with_updates(start, curve.updates(start, values))
-    assert curve.max_error(plant, start, "valve_linear") < 0.015
+    assert curve.max_error(plant, start, "valve_linear") < 0.005
 
 
 def test_knots_where_the_data_are_not_fitted_and_the_tail_meets_full_flow():

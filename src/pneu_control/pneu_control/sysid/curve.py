@@ -10,7 +10,8 @@ non-decreasing) and parametrised by
   [5 + c − w, 5 + c + w] (the centre leak still flows there);
 - ``<valve>.flow_<port>@±δ``: the increment of g from the next knot inward
   to the knot δ beyond the dead band's edge on that side (≥ 0: monotone by
-  construction), at δ = :data:`KNOTS_DV`.
+  construction), at δ = :data:`KNOTS_DV`; between knots the curve keeps the
+  start curve's shape (at the start's values it is the start curve).
 
 The knots ride on the edges: the flow is most sensitive to the voltage just
 past the dead band (a fixed grid there needs 50 mV spacing to replay the
@@ -215,26 +216,45 @@ def updates(start, values: dict[str, float]) -> dict[str, tuple[float, ...]]:
 
 
 def _port_curve(v, port: str, h: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
-    """(u, g) of one port from its handles ``h`` (see the module docstring); where a knot has
-    no handle, the start curve ``v``'s."""
+    """(u, g) of one port from its handles ``h`` (see the module docstring).
+
+    Between two fitted knots the curve follows the start curve ``v``'s shape there (mapped
+    onto the knots as the edges move), so at the start's own values it is the start curve;
+    beyond the last fitted knot, the start's shape with the difference fading out at full
+    opening.
+    """
+    u_s = port_curves(v)[0]
     c0, w0 = _edges(v, port)
     c, w = h.get("null", c0), max(h.get("band", w0), 0.0)
     us, gs = [5.0 + c - w, 5.0 + c + w], [0.0, 0.0]
     for side, sgn in (("+", 1.0), ("-", -1.0)):
+        ku = [5.0 + c + sgn * w, *_knot_u(c, w, side).tolist()]
+        ku0 = [5.0 + c0 + sgn * w0, *_knot_u(c0, w0, side).tolist()]
+        g_prev = 0.0
+        j = 0
+        while j + 1 < min(len(ku), len(ku0)) and f"{side}{KNOTS_DV[j]:.2f}" in h:
+            g_k = g_prev + sgn * h[f"{side}{KNOTS_DV[j]:.2f}"]
+            a0, b0, a, b = ku0[j], ku0[j + 1], ku[j], ku[j + 1]
+            s_a, s_b = (float(x) for x in _g(v, port, np.array([a0, b0])))
+            inner = u_s[(sgn * (u_s - a0) > 0.0) & (sgn * (u_s - b0) < 0.0)]
+            for x0, sx in zip(inner, _g(v, port, inner)):
+                t = (x0 - a0) / (b0 - a0)
+                frac = (sx - s_a) / (s_b - s_a) if abs(s_b - s_a) > 1e-12 else t
+                us.append(float(a + t * (b - a)))
+                gs.append(g_prev + (g_k - g_prev) * frac)
+            us.append(b)
+            gs.append(g_k)
+            g_prev = g_k
+            j += 1
+        last = ku[j]  # the last fitted point (the edge if none): the start's shape beyond
         end = 10.0 if sgn > 0 else 0.0
-        b_end = float(_g(v, port, np.array([end]))[0])
-        g_fit = b_fit = 0.0  # the last fitted knot's g, and the start curve's there
-        for j, uk in enumerate([*_knot_u(c, w, side).tolist(), end]):
-            b = float(_g(v, port, np.array([uk]))[0])
-            key = f"{side}{KNOTS_DV[j]:.2f}" if j < len(KNOTS_DV) else ""
-            if key in h:
-                g_fit += sgn * h[key]
-                g, b_fit = g_fit, b
-            else:  # no data: the start's shape, the difference fading out at full opening
-                span = b_end - b_fit
-                g = b + (g_fit - b_fit) * ((b_end - b) / span if abs(span) > 1e-12 else 0.0)
-            us.append(uk)
-            gs.append(g)
+        b_last, b_end = (float(x) for x in _g(v, port, np.array([last, end])))
+        tail = np.append(u_s[sgn * (u_s - last) > 0.0], end)
+        span = b_end - b_last
+        for x, b in zip(tail, _g(v, port, tail)):
+            fade = (b_end - b) / span if abs(span) > 1e-12 else 0.0
+            us.append(float(x))
+            gs.append(float(b + (g_prev - b_last) * fade))
     u, idx = np.unique(np.round(us, 6), return_index=True)
     g = np.asarray(gs)[idx]
     return u, np.clip(np.maximum.accumulate(g), -FLOW_BOUND, FLOW_BOUND)

@@ -181,6 +181,29 @@ class _Schedule:
         self.t += duration_s
 
 
+def _flow_ladders(s: _Schedule, rng: np.random.Generator, side: float, stop: float) -> None:
+    """Flow ladders (linear axis): from rest at ∓``side`` mm, the valve stepped through a
+    ladder of openings until the guard at ±``stop`` mm, then blocked -- the valve's curve
+    at known volume, voltage by voltage (the pulses give two to four sizes only)."""
+    ladder = [0.3, 0.55, 0.8, 1.0, 1.2, 1.4, 1.7, 2.1, 2.6]
+    scale = float(rng.uniform(0.95, 1.05))
+    for sign in (1.0, -1.0):
+        start = -sign * side
+        s.add(
+            "closed", 1.2, f"to {start:+.0f} mm", ref={"kind": "move", "target": start, "time": 1.0}
+        )
+        s.add(
+            "pulse",
+            1.8,
+            f"flow ladder {sign * scale * ladder[0]:+.2f} .. {sign * scale * ladder[-1]:+.2f} V, then blocked",
+            u=sign * scale * ladder[-1],
+            guard_lo=-stop if sign < 0 else -math.inf,
+            guard_hi=stop if sign > 0 else math.inf,
+            ladder=tuple(sign * scale * a for a in ladder),
+            ladder_s=0.07,
+        )
+
+
 def _linear(seed: int, level: str) -> list[Segment]:
     """Linear axis, x in mm from mid-stroke (soft limits ±65 mm less the braking distance)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 1]))
@@ -208,26 +231,7 @@ def _linear(seed: int, level: str) -> list[Segment]:
                 guard_lo=-stop if sign < 0 else -math.inf,
                 guard_hi=stop if sign > 0 else math.inf,
             )
-    # flow ladders: from rest, the valve stepped through a ladder of openings until the guard,
-    # then blocked -- the valve's curve at known volume, voltage by voltage (the pulses above
-    # give two to four sizes only)
-    ladder = [0.3, 0.55, 0.8, 1.0, 1.2, 1.4, 1.7, 2.1, 2.6]
-    scale = float(rng.uniform(0.95, 1.05))
-    for sign in (1.0, -1.0):
-        start = -sign * side
-        s.add(
-            "closed", 1.2, f"to {start:+.0f} mm", ref={"kind": "move", "target": start, "time": 1.0}
-        )
-        s.add(
-            "pulse",
-            1.8,
-            f"flow ladder {sign * scale * ladder[0]:+.2f} .. {sign * scale * ladder[-1]:+.2f} V, then blocked",
-            u=sign * scale * ladder[-1],
-            guard_lo=-stop if sign < 0 else -math.inf,
-            guard_hi=stop if sign > 0 else math.inf,
-            ladder=tuple(sign * scale * a for a in ladder),
-            ladder_s=0.07,
-        )
+    _flow_ladders(s, rng, side, stop)
     # slow ramps both ways at several speeds (friction curve)
     speeds = [8.0, 20.0, 50.0] if full else [12.0, 40.0]
     s.add("closed", 1.5, "to -45 mm", ref={"kind": "move", "target": -45.0, "time": 1.0})
