@@ -35,7 +35,7 @@ def _handles_at_start(start, rec):
 
 def test_start_values_reproduce_the_start_curve():
     """At the start's own values the parameters give the catalogue back (within 0.5 % of
-    full flow: only its first 70 mV, under 0.2 %, become the dead band): between knots the
+    full flow: only its first mV become the dead band): between knots the
     curve keeps the start's shape."""
     start = PlantParams()
     rec = _record(np.linspace(2.0, 8.0, 60_000))

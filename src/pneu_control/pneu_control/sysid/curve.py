@@ -54,7 +54,7 @@ __all__ = [
 
 KNOTS_DV = (0.1, 0.25, 0.45, 0.7, 1.0, 1.4, 1.9, 2.6, 3.3, 4.0, 4.7)  # V beyond a dead band's edge
 MIN_SAMPLES = 100  # valid samples (0.1 s) between a knot and the next inward to fit it
-EDGE_FLOW = 2e-3  # g below which the start curve counts as inside its dead band
+EDGE_FLOW = 1e-4  # g below which the start curve counts as inside its dead band (the closing path's leak fades over g 0-0.01: a coarser edge moves the null's leak balance)
 _WIDTH_V = 0.05  # fit coordinate of the edges: z = 1 is 50 mV
 _WIDTH_G = 0.02  # ... of the increments: z = 1 is 2 % of full flow
 _SIGN = {"4": 1.0, "2": -1.0}
