@@ -4,9 +4,8 @@ The hidden plant's linear valve has a flow-vs-voltage curve of its own near the
 null: a wider dead band off the null (its centre 45 mV below 5 V on port 4),
 linear (not progressive) past it, a steeper side above the null than below,
 and port 2 with a dead band of its own; with 1.8x the centre leakage and 1.5x
-the viscous friction. Its motor has 1.3x the inertia (several in-model values
-changed together, the motor's wrong optimum, are issue 21 item 1's: a start
-point problem, not the curve's). ``pneu excite`` runs it twice
+the viscous friction. Its rotary axis differs inside the model (inertia,
+Coulomb torque and inlet volume together). ``pneu excite`` runs it twice
 (seed 11 for identify, seed 22 held out); identify starts from
 config/plant.yaml. The identified curve must be within 5 % of full flow at
 every voltage, J_m within 10 %, and the held-out fit >= 90 % on every signal.
@@ -53,7 +52,9 @@ def other_shape_plant(base):
             "valve_linear.flow_2": tuple(float(-x) for x in np.interp(uu, u2, g2)),
             "valve_linear.leak_fraction": 1.8 * v.leak_fraction,
             "linear.c_v": 1.5 * base.linear.c_v,
-            "rotary.J_m": 1.3 * base.rotary.J_m,
+            "rotary.J_m": 1.4 * base.rotary.J_m,
+            "rotary.M_c": 1.2 * base.rotary.M_c,
+            "rotary.V_m1": 1.3 * base.rotary.V_m1,
         },
     )
 
