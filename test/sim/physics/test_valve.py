@@ -133,6 +133,94 @@ def test_opening_curve_dead_band_saturation_and_mapping():
     assert np.all(np.diff(opening) >= 0)
 
 
+def _own_curve(db_lo=0.5, db_hi=0.3, gain_lo=0.6, gain_hi=1.0, port2_scale=0.8):
+    """A valve of its own: dead band [5 - db_lo, 5 + db_hi] V (a null offset), linear
+    above it with another gain on either side, port 2 with less flow than port 4."""
+    u = (
+        0.0,
+        5.0 - db_lo - 1.0 / gain_lo,
+        5.0 - db_lo,
+        5.0 + db_hi,
+        5.0 + db_hi + 1.0 / gain_hi,
+        10.0,
+    )
+    f4 = (-1.0, -1.0, 0.0, 0.0, 1.0, 1.0)
+    return {
+        "valve_linear.u_curve": u,
+        "valve_linear.flow_4": f4,
+        "valve_linear.flow_2": tuple(-port2_scale * f for f in f4),
+    }
+
+
+def test_own_curve_mirroring_the_catalogue_is_the_catalogue_twin():
+    """One representation: the catalogue written as an own curve gives the same bytes."""
+    from pneu_sim.physics.valve_curve import catalogue_curve
+
+    v = PlantParams().valve_linear
+    u, f4, f2 = catalogue_curve(v.du_table, v.flow_table)
+    own = {
+        "valve_linear.u_curve": tuple(u),
+        "valve_linear.flow_4": tuple(f4),
+        "valve_linear.flow_2": tuple(f2),
+    }
+    assert np.array_equal(_prm(**own), _prm())
+
+
+def test_own_curve_sets_each_port_and_keeps_the_leak_rules():
+    prm = _prm(**_own_curve())
+    base = k.P_VALVE_L
+    a_max = prm[base + k.VB_AMAX]
+    a_leak = prm[base + k.VB_ALEAK]
+    # the whole dead band [4.5, 5.3] V only leaks, on every path
+    for y in (4.55, 5.0, 5.25):
+        assert k.valve_areas(prm, base, y) == pytest.approx((a_leak,) * 4, rel=1e-12)
+    # above: port 4 from supply with gain 1 /V, port 2 to exhaust with 0.8 of it
+    s4, e4, s2, e2 = k.valve_areas(prm, base, 5.8)
+    assert s4 == pytest.approx(a_leak + 0.5 * a_max)
+    assert e2 == pytest.approx(a_leak + 0.4 * a_max)
+    assert e4 == s2 == 0.0  # the closing lands' leak faded out
+    # below: gain 0.6 /V from the dead band's lower edge at 4.5 V
+    s4, e4, s2, e2 = k.valve_areas(prm, base, 3.5)
+    assert e4 == pytest.approx(a_leak + 0.6 * a_max)
+    assert s2 == pytest.approx(a_leak + 0.48 * a_max)
+    assert s4 == e2 == 0.0
+
+
+def test_own_curve_drives_the_piston_as_its_null_offset_says():
+    """At 5.25 V the catalogue valve extends the piston; one whose dead band reaches
+    5.3 V only leaks there: the piston hardly moves."""
+    runs = {}
+    for name, upd in (("catalogue", {}), ("own", _own_curve())):
+        plant = Plant(with_updates(PlantParams(), upd))
+        plant.reset(x0=-0.03)
+        for _ in range(800):
+            plant.step(5.25, 5.0)
+        runs[name] = plant.state.x + 0.03
+    assert runs["catalogue"] > 5e-3
+    assert abs(runs["own"]) < 0.2 * runs["catalogue"]
+
+
+@pytest.mark.parametrize(
+    ("updates", "field", "allowed"),
+    [
+        ({"valve_linear.flow_4": (-1.0, -1.0, 0.2, 0.0, 1.0, 1.0)}, "flow_4", "non-decreasing"),
+        ({"valve_linear.flow_2": (1.3, 1.0, 0.0, 0.0, -1.0, -1.0)}, "flow_2", "[-1.25, 1.25]"),
+        (
+            {"valve_linear.u_curve": (0.0, 4.0, 3.0, 5.3, 6.3, 10.0)},
+            "u_curve",
+            "strictly increasing",
+        ),
+        ({"valve_linear.flow_4": (-1.0, 0.0, 1.0)}, "flow_4", "6 values"),
+    ],
+)
+def test_own_curve_refused_names_the_field_and_the_rule(updates, field, allowed):
+    from pneu_msgs_py.params.core import ParamError
+
+    with pytest.raises(ParamError, match=field) as err:
+        with_updates(PlantParams(), {**_own_curve(), **updates})
+    assert allowed in str(err.value)
+
+
 def test_full_valve_fills_chamber_1_and_vents_chamber_2():
     p = with_updates(PlantParams(), {"linear.breakaway_ratio": 3.0, "linear.A_f": 200.0})
     plant = Plant(p)  # huge friction: piston stays, watch the pressures

@@ -16,7 +16,6 @@ loop when any source it is built from changed (a digest kept beside the cache).
 
 from __future__ import annotations
 
-import hashlib
 import math
 import warnings
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 from numba import njit
 from numba.core.errors import NumbaExperimentalFeatureWarning
 from pneu_msgs_py.params import records
+from pneu_sim.physics import jit_cache
 from pneu_sim.physics import kernel as plant_kernel
 from pneu_sim.physics.kernel import step_period
 
@@ -202,26 +202,7 @@ def _sources() -> list[Path]:
 
 def refresh_cache() -> None:
     """Drop the cached :func:`closed_loop` if a source it is compiled from changed."""
-    digest = hashlib.sha256()
-    for f in _sources():
-        digest.update(f.read_bytes())
-    cache = getattr(closed_loop, "_cache", None)  # numba's Dispatcher cache (no public API)
-    path = getattr(cache, "cache_path", None)
-    if path is None:
-        return
-    stamp = Path(path) / "loop.closed_loop.sources"
-    want = digest.hexdigest()
-    try:
-        if stamp.read_text() == want:
-            return
-    except OSError:
-        pass
-    cache.flush()
-    try:
-        stamp.parent.mkdir(parents=True, exist_ok=True)
-        stamp.write_text(want)
-    except OSError:
-        pass  # read-only cache: numba recompiles in memory
+    jit_cache.refresh_cache(closed_loop, _sources(), "loop.closed_loop")
 
 
 refresh_cache()

@@ -8,7 +8,10 @@ What each segment is for (the parameters it makes identifiable):
     leakage, the chamber volumes and the polytropic index through the slow
     pressure drift, the piston creeping under it).
 ``pulse``
-    an open-loop valve step ``u`` (V) from a base: 5 V on the linear axis
+    an open-loop valve step ``u`` (V) from a base -- or, a *flow ladder*, steps
+    through ``ladder`` (V from the base, ``ladder_s`` each) first: from rest
+    on the linear axis the valve's curve at known volume, opening by opening,
+    until the guard: 5 V on the linear axis
     (from rest at one side: breakaway, valve dead band and flow scale, supply
     pressure, the chamber dynamics), the operating voltage of the previous
     closed-loop segment on the rotary axis (steps of several sizes in both
@@ -73,6 +76,8 @@ class Segment:
     guard_lo: float = -math.inf  # pulse guard on the measured output (mm | rpm)
     guard_hi: float = math.inf
     ref: dict[str, Any] = field(default_factory=dict)  # closed: {"kind": ..., ...} (mm | rpm)
+    ladder: tuple[float, ...] = ()  # pulse: steps from the base (V), each ladder_s long, then u
+    ladder_s: float = 0.0
 
     @property
     def t1_s(self) -> float:
@@ -155,6 +160,7 @@ def design_from_json(text: str | dict[str, Any]) -> ExcitationDesign:
         s = dict(s)
         s["guard_lo"] = -math.inf if s.get("guard_lo") is None else s["guard_lo"]
         s["guard_hi"] = math.inf if s.get("guard_hi") is None else s["guard_hi"]
+        s["ladder"] = tuple(s.get("ladder", ()))
         segs.append(Segment(**s))
     return ExcitationDesign(
         axis=d["axis"],
@@ -173,6 +179,29 @@ class _Schedule:
     def add(self, kind: str, duration_s: float, label: str, **kw: Any) -> None:
         self.segments.append(Segment(kind, round(self.t, 6), float(duration_s), label, **kw))
         self.t += duration_s
+
+
+def _flow_ladders(s: _Schedule, rng: np.random.Generator, side: float, stop: float) -> None:
+    """Flow ladders (linear axis): from rest at ∓``side`` mm, the valve stepped through a
+    ladder of openings until the guard at ±``stop`` mm, then blocked -- the valve's curve
+    at known volume, voltage by voltage (the pulses give two to four sizes only)."""
+    ladder = [0.3, 0.55, 0.8, 1.0, 1.2, 1.4, 1.7, 2.1, 2.6]
+    scale = float(rng.uniform(0.95, 1.05))
+    for sign in (1.0, -1.0):
+        start = -sign * side
+        s.add(
+            "closed", 1.2, f"to {start:+.0f} mm", ref={"kind": "move", "target": start, "time": 1.0}
+        )
+        s.add(
+            "pulse",
+            1.8,
+            f"flow ladder {sign * scale * ladder[0]:+.2f} .. {sign * scale * ladder[-1]:+.2f} V, then blocked",
+            u=sign * scale * ladder[-1],
+            guard_lo=-stop if sign < 0 else -math.inf,
+            guard_hi=stop if sign > 0 else math.inf,
+            ladder=tuple(sign * scale * a for a in ladder),
+            ladder_s=0.07,
+        )
 
 
 def _linear(seed: int, level: str) -> list[Segment]:
@@ -202,6 +231,7 @@ def _linear(seed: int, level: str) -> list[Segment]:
                 guard_lo=-stop if sign < 0 else -math.inf,
                 guard_hi=stop if sign > 0 else math.inf,
             )
+    _flow_ladders(s, rng, side, stop)
     # slow ramps both ways at several speeds (friction curve)
     speeds = [8.0, 20.0, 50.0] if full else [12.0, 40.0]
     s.add("closed", 1.5, "to -45 mm", ref={"kind": "move", "target": -45.0, "time": 1.0})

@@ -183,7 +183,11 @@ class Exciter:
             if not self._tripped and not (seg.guard_lo <= yg <= seg.guard_hi):
                 self._tripped = True
                 self.guard_trips += 1
-            u = base if self._tripped else base + seg.u
+            step = seg.u
+            if seg.ladder:  # a flow ladder: its steps, then u
+                i_step = int(tau / seg.ladder_s) if seg.ladder_s > 0.0 else len(seg.ladder)
+                step = seg.ladder[i_step] if i_step < len(seg.ladder) else seg.u
+            u = base if self._tripped else base + step
         else:
             r, rd = reference_at(seg, tau, self._y0, self._levels.get(i))
             self._r, self._rd, self._r_paper = r / self._k, rd / self._k, r

@@ -64,6 +64,7 @@ class FitOptions:
     params: tuple[str, ...] | None = None  # names to fit (default: every parameter of the axis)
     short_segment_s: float = 0.2  # the flow-curve stage's smooth cost (see _scan_dead_band)
     short_every: int = 3  # ... on every 3rd short segment
+    curve: bool = True  # last stage: the valve's own curve (pneu_control.sysid.curve)
 
 
 @dataclass
@@ -94,6 +95,8 @@ class AxisFit:
     replicate_shift: list[float] = field(default_factory=list)  # RMS d of the bootstrap draws
     unexplained: list[str] = field(default_factory=list)  # the per-segment check's lines
     q95: float = 1.96  # the 95 % quantile the intervals use (Student's t with the draws' dof)
+    fit_params: tuple = ()  # the FitParams of ``names`` (model.FitParam)
+    curve_support: object = None  # what the data inform of the valve's own curve (curve stage)
 
     def ci95(self, i: int) -> float:
         """95 % half-width of parameter ``i`` (q95 σ), in its unit."""
@@ -132,7 +135,7 @@ def _autocorr_time(r: np.ndarray, max_lag: int = 200) -> float:
     return tau
 
 
-STAGES = 4  # flow curve, every parameter, and each once again (fit_axis)
+STAGES = 5  # flow curve, every parameter, each once again (_staged_fit), the own curve
 
 
 def fit_axis(
@@ -143,10 +146,15 @@ def fit_axis(
     log: Callable[[str], None] = print,
     stage: Callable[[], None] = lambda: None,
 ) -> AxisFit:
-    """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``: the staged fit
-    (:func:`_staged_fit`), then the per-segment check (:mod:`pneu_control.sysid.groups`):
-    where some segments are not explained, the whole fit again from their own optimum, and
-    the lower cost kept; what is still unexplained goes into :attr:`AxisFit.unexplained`."""
+    """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``: the staged fit in
+    the catalogue curve's family (:func:`_staged_fit`); the per-segment check
+    (:mod:`pneu_control.sysid.groups`): where some segments are not explained, the whole fit
+    again from their own optimum, the lower cost kept; then, with ``options.curve``, the
+    valve's own curve (:func:`_fit_own_curve`). What is still unexplained at the end goes
+    into :attr:`AxisFit.unexplained`.
+
+    ``stage()`` is called as each of the (at most :data:`STAGES`) stages begins.
+    """
     from pneu_control.sysid import groups
 
     options = options or FitOptions()
@@ -161,7 +169,64 @@ def fit_axis(
         if again.cost < fit.cost:
             fit = replace(again, cost_start=fit.cost_start)
             check = groups.check_segments(full, full.z_start(_start_of(fit)))
+    if options.curve and f"valve_{axis}.Q_n" in fit.names:
+        stage()
+        own = _fit_own_curve(axis, base, records, options, fit, log)
+        if own is not None:
+            fit, prob = own
+            check = groups.check_segments(prob, prob.z_start(_start_of(fit)))
     return replace(fit, unexplained=check.lines(axis))
+
+
+def _fit_own_curve(axis, base, records, options, fit: AxisFit, log):
+    """The last stage: the valve's own monotone curve per port (knots where the data are,
+    :mod:`pneu_control.sysid.curve`) with every other parameter but the catalogue curve's
+    scale and dead band, from the catalogue-family fit ``fit``: (the fit, its Problem), or
+    None when it does not lower the cost.
+
+    The catalogue family is a shift and a scale of one shape; a valve of another shape
+    near the null makes the leakage and friction stand in for the difference there. The
+    start is ``fit``'s curve itself (written on the chart's breakpoints), so this stage
+    only ever moves away from it where the data say so.
+    """
+    from pneu_control.sysid import curve
+
+    valve = f"valve_{axis}"
+    estimate = None
+    if axis == "linear":  # the chambers as flow meters: a direct measurement to start from
+        from pneu_control.sysid.valve_flow import estimate_curve
+
+        estimate = estimate_curve(fit.plant, records, fit.offsets)
+    start_plant = curve.own_curve_plant(fit.plant, axis, estimate)
+    knots, sup = curve.fit_params(axis, start_plant, records)
+    drop = {f"{valve}.Q_n", f"{valve}.{model.DEAD_BAND}"}
+    others = [n for n in fit.names if n not in drop]
+    log(
+        f"  {axis}: stage 3, the valve's own curve: {len(knots)} knots "
+        f"({sup.text()}) with {len(others)} other parameters"
+    )
+    prob = Problem(
+        axis,
+        start_plant,
+        records,
+        replace(options, params=(*others, *(p.name for p in knots))),
+        extra=knots,
+    )
+    offs = {f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()}
+    own = prob.solve(offs, log)
+    if not own.cost < fit.cost:
+        log(f"  {axis}: own curve cost {own.cost:.5g} >= {fit.cost:.5g}: the catalogue family kept")
+        return None
+    # the report's base column: the values identify started from, not this stage's start
+    own.base = [
+        own.base[i] if curve.is_handle(n) else model.base_value(base, own.fit_params[i])
+        for i, n in enumerate(own.names)
+    ]
+    own.cost_start = fit.cost_start
+    own.nfev += fit.nfev
+    own.wall_s += fit.wall_s
+    own.curve_support = sup
+    return own, prob
 
 
 # The volumes first: with the catalogue's volume the first steps of a joint fit trade the
@@ -186,9 +251,8 @@ def _start_of(fit: AxisFit) -> dict[str, float]:
 
 
 def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
-    """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records``.
-
-    ``stage()`` is called as each of the (at most :data:`STAGES`) stages below begins.
+    """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records`` with the valve's curve
+    a shift and scale of the catalogue's.
 
     Stage 1: the valve's flow curve (scale and dead band: what sets the
     operating points, and what a start far off gets most wrong) by
@@ -196,7 +260,6 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
     there -- otherwise the friction, supply and exhaust parameters absorb a
     wrong flow curve (a local minimum). When stage 2 moves the dead band away
     from the scan's pick, the scan runs again with the other parameters as
-    fitted (stage()
     fitted (stage 2 again if it finds a lower cost elsewhere).
     """
     mine = tuple(p.name for p in model.AXIS_PARAMS[axis])
@@ -247,7 +310,12 @@ def refit(axis: str, base, records: list[Record], fit: AxisFit, options: FitOpti
     """The least squares of ``fit``'s parameters on other ``records``, from ``fit``'s values
     (the offsets from 0): the stage-2 fit alone, as :func:`fit_axis` ends."""
     options = replace(options or FitOptions(), params=tuple(fit.names))
-    problem = Problem(axis, base, records, options)
+    knots = tuple(p for p in fit.fit_params if "@" in p.name)
+    if knots:  # the knots ride on the fitted curve's own shape
+        from pneu_control.sysid.curve import with_curve_of
+
+        base = with_curve_of(base, fit.plant, fit.curve_support.valve)
+    problem = Problem(axis, base, records, options, extra=knots)
     return problem.solve(dict(zip(fit.names, fit.value)), lambda _m: None)
 
 
@@ -302,11 +370,14 @@ class Problem:
         options: FitOptions,
         every: int = 1,
         select: Callable[[object], bool] | None = None,
+        extra: tuple[model.FitParam, ...] = (),
     ):
         """``every``: every n-th replayed segment only; ``select``: only the segments whose
-        design segment (:class:`pneu_control.sysid.design.Segment`) it accepts."""
+        design segment (:class:`pneu_control.sysid.design.Segment`) it accepts; ``extra``:
+        parameters beyond the axis's own (a valve's curve knots)."""
         self.axis, self.base, self.options = axis, base, options
-        self.params = tuple(p for p in model.AXIS_PARAMS[axis] if p.name in options.params)
+        known = model.AXIS_PARAMS[axis] + tuple(extra)
+        self.params = tuple(p for p in known if p.name in options.params)
         self.p0 = [model.base_value(base, p) for p in self.params]
         bounds = []
         for p, b in zip(self.params, self.p0):
@@ -421,7 +492,9 @@ class Problem:
             r = self.residuals(z)
             if n_eval[0] % (len(z) + 1) == 1:
                 vals, _ = self.unpack(z)
-                shown = ", ".join(f"{p.name.split('.')[-1]}={v:.4g}" for p, v in zip(params, vals))
+                shown = ", ".join(
+                    f"{p.name.split('.', 1)[-1]}={v:.4g}" for p, v in zip(params, vals)
+                )
                 log(
                     f"  {axis} eval {n_eval[0]:4d}  cost {0.5 * float(r @ r):.5g}  "
                     f"({time.perf_counter() - t0:.0f} s)  {shown}"
@@ -500,6 +573,7 @@ class Problem:
             sigma_iid=[float(v) for v in sigma_iid],
             n_clusters=self.n_clusters,
             plant=model.apply(self.base, self.params, vals),
+            fit_params=self.params,
         )
 
 

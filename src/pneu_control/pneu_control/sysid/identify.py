@@ -80,7 +80,7 @@ class Identification:
                         "base": fit.base[i],
                         "value": fit.value[i],
                         "ci95": fit.ci95(i),
-                        "rel_ci95": fit.rel_ci95(i) if not name.endswith(".dead_band") else None,
+                        "rel_ci95": None if _absolute(name) else fit.rel_ci95(i),
                         "taken": name not in self.kept_base,
                     }
                 )
@@ -125,7 +125,17 @@ class Identification:
         """The identification as Markdown: one table row per parameter and noise estimate, then
         the correlated pairs and each bag's pressure sensor offsets."""
         lines = ["| parameter | base | identified | 95 % CI | taken |", "|---|---|---|---|---|"]
+        for fit in self.fits.values():  # a valve's own curve: one row (its knots in the JSON)
+            if fit.curve_support is not None:
+                n = sum(1 for name in fit.names if "@" in name)
+                band = max(fit.ci95(i) for i, name in enumerate(fit.names) if "@" in name)
+                lines.append(
+                    f"| {fit.curve_support.valve} curve | catalogue | own, {n} values "
+                    f"({fit.curve_support.text()}) | ±{band:.3g} at most | yes |"
+                )
         for r in self.rows():
+            if "@" in r["name"]:
+                continue
             ci = (
                 f"±{r['ci95']:.3g} {r['unit']}"
                 if r["rel_ci95"] is None
@@ -142,6 +152,8 @@ class Identification:
             )
         for axis, f in self.fits.items():
             for a, b, rho in f.correlated_pairs():
+                if "@" in a and "@" in b:
+                    continue  # neighbouring knots of one curve trade by construction
                 lines.append(
                     f"\n{axis}: {a} and {b} correlated (ρ = {rho:+.3f}): not separately identifiable from these bags"
                 )
@@ -277,23 +289,30 @@ def _with_noise(plant, noise: dict[str, NoiseEstimate]):
     return with_updates(plant, upd)
 
 
-def _taken(plant, fit: AxisFit, kept: list[str]):
+def _taken(plant, fit: AxisFit, kept: list[str], every: bool = False):
     """``plant`` with the values of ``fit`` whose 1.96 σ is within :data:`UNIDENTIFIABLE` (of
-    the value; of the width for a linear parameter); the names of the others appended to
-    ``kept``."""
-    params = [p for p in model.AXIS_PARAMS[fit.axis] if p.name in fit.names]
+    the value; of the width for a linear parameter), the names of the others appended to
+    ``kept``; with ``every``, every fitted value. A valve's own curve is taken whole."""
+    from pneu_control.sysid.curve import with_curve_of
+
+    params = list(fit.fit_params)
     take = []
     for i, p in enumerate(params):
+        if "@" in p.name:  # a curve knot: the curve is taken whole, below
+            continue
         # judged on the estimated scatter (1.96 σ), not on the interval's t quantile, which
         # also carries how few bootstrap draws that estimate rests on
         half = 1.96 * fit.sigma[i]
         v = fit.value[i]
         rel = half / p.width if p.transform == "lin" else (half / abs(v) if v else math.inf)
-        if not math.isfinite(rel) or rel > UNIDENTIFIABLE:
+        if not every and (not math.isfinite(rel) or rel > UNIDENTIFIABLE):
             kept.append(p.name)
         else:
             take.append(i)
-    return model.apply(plant, [params[i] for i in take], [fit.value[i] for i in take])
+    plant = model.apply(plant, [params[i] for i in take], [fit.value[i] for i in take])
+    if fit.curve_support is not None:  # the valve's own curve, as fitted (its band reported)
+        plant = with_curve_of(plant, fit.plant, fit.curve_support.valve)
+    return plant
 
 
 def _replicated(base, fits: dict[str, AxisFit], recs, noise, options, log) -> dict[str, AxisFit]:
@@ -307,8 +326,7 @@ def _replicated(base, fits: dict[str, AxisFit], recs, noise, options, log) -> di
     t0 = time.perf_counter()
     twin = base
     for fit in fits.values():
-        params = tuple(p for p in model.AXIS_PARAMS[fit.axis] if p.name in fit.names)
-        twin = model.apply(twin, params, fit.value)
+        twin = _taken(twin, fit, [], every=True)
     twin = _with_noise(twin, noise)
     records = list({id(r): r for rs in recs.values() for r in rs}.values())
     draws = [replicate_records(records, tuple(fits), twin, k) for k in range(REPLICATES)]
@@ -336,6 +354,11 @@ def _replicated(base, fits: dict[str, AxisFit], recs, noise, options, log) -> di
         f"{time.perf_counter() - t0:.0f} s"
     )
     return out
+
+
+def _absolute(name: str) -> bool:
+    """Is the interval of ``name`` reported in its unit (a dead band, a curve knot)?"""
+    return name.endswith("." + model.DEAD_BAND) or "@" in name
 
 
 def _core_leaves(tree: Any) -> Any:
@@ -386,7 +409,10 @@ def _identified_tree(ident: Identification, base_tree: dict, names: str) -> dict
     tree = copy.deepcopy(base_tree)
     values = flatten(ident.plant)
     for fit in ident.fits.values():
+        _set_own_curve(tree, fit, values, names)
         for i, name in enumerate(fit.names):
+            if "@" in name:
+                continue
             if name.endswith("." + model.DEAD_BAND):
                 leaf = name.split(".")[0] + ".du_table"
                 if name in ident.kept_base:
@@ -426,6 +452,40 @@ def _identified_tree(ident: Identification, base_tree: dict, names: str) -> dict
                 f"identified from the quiet segments of {names} (±{100 * rel:.2g} %)",
             )
     return tree
+
+
+def _set_own_curve(tree: dict, fit: AxisFit, values: dict, names: str) -> None:
+    """The valve's own curve of ``fit`` (if its last stage fitted one) into ``tree``, with its
+    provenance: what the data informed, the knots' 95 % band; Q_n becomes its unit."""
+    sup = fit.curve_support
+    if sup is None:
+        return
+    valve = sup.valve
+    band = max((fit.ci95(i) for i, n in enumerate(fit.names) if "@" in n), default=0.0)
+    src = (
+        f"identified from {names}: the valve's own curve, monotone per port, {sup.text()}; "
+        f"knots ±{band:.3f} of full flow at most (95 %)"
+    )
+    for leaf in ("u_curve", "flow_4", "flow_2"):
+        key = f"{valve}.{leaf}"
+        _set(tree, key, [float(v) for v in values[key]], src)
+    if sup.ports == ("4",):
+        _set(
+            tree,
+            f"{valve}.flow_2",
+            [float(v) for v in values[f"{valve}.flow_2"]],
+            src + "; port 2 unused by the plumbing: written as port 4's image (-flow_4)",
+        )
+    _set(
+        tree,
+        f"{valve}.Q_n",
+        float(values[f"{valve}.Q_n"]),
+        f"identified from {names}: the unit of the identified curve (u_curve, flow_4, flow_2 "
+        "are fractions of this nominal flow), the flow scale of the catalogue-shaped fit it "
+        "started from",
+    )
+    node = tree[valve]["Q_n"]
+    node.pop("range", None)  # the catalogue's tolerance band is not this unit's uncertainty
 
 
 def write_plant(

@@ -25,7 +25,7 @@ from typing import Any
 from pneu_msgs_py.params.core import flatten, with_updates
 from pneu_sim.physics.params import K_SEAL_ESTIMATE
 
-from pneu_control.sysid import model
+from pneu_control.sysid import curve, model
 from pneu_control.sysid.excite import excitation_spec, run_excitation
 from pneu_control.sysid.identify import Identification, identify
 from pneu_control.sysid.record import load_record
@@ -255,7 +255,11 @@ def compare(ident: Identification, base, truth) -> list[Row]:
     """One :class:`Row` per fitted parameter of ``ident``, against the hidden plant ``truth``."""
     rows = []
     for fit in ident.fits.values():
+        if fit.curve_support is not None:  # the valve's own curve, against the true one
+            rows.append(curve_row(ident.plant, truth, fit.curve_support))
         for i, name in enumerate(fit.names):
+            if curve.is_handle(name):
+                continue
             rows.append(
                 Row(
                     name,
@@ -277,6 +281,16 @@ def compare(ident: Identification, base, truth) -> list[Row]:
         tol = TOLERANCE["noise.x" if key == "x" else "noise.p"]
         rows.append(Row(f"noise σ {key}", t, b, nz.sigma, nz.rel_ci95 * nz.sigma, True, tol))
     return rows
+
+
+CURVE_TOLERANCE = 0.05  # of full flow, at every voltage (issue 21)
+
+
+def curve_row(plant, truth, sup) -> Row:
+    """The identified valve curve's worst error over 0-10 V (fraction of full flow), as a
+    row: truth 0, the error as the value."""
+    err = curve.max_error(plant, truth, sup.valve, sup.ports)
+    return Row(f"{sup.valve}.curve max |Δf|", 0.0, 0.0, err, 0.0, True, ("abs", CURVE_TOLERANCE))
 
 
 def study_plant(

@@ -137,17 +137,19 @@ VB_ALEAK = 1
 VB_B = 2
 VB_BLAM = 3
 VB_HW = 4  # half hysteresis width
-VB_DULAP = 5
+VB_FLAP = 5  # normalised flow over which a closing path's leak fades out
 VB_PHI11 = 6
 VB_PHI12 = 7
 VB_PHI21 = 8
 VB_PHI22 = 9
 VB_G1 = 10
 VB_G2 = 11
-VB_TAB = 12  # TAB_N samples of area fraction on a 0.01 V grid
-TAB_N = 501
+# each port's signed normalised flow (pneu_sim.physics.valve_curve), TAB_N samples over 0-10 V
+TAB_N = 1001
 TAB_DU = 0.01
-VB_SIZE = VB_TAB + TAB_N
+VB_TAB4 = 12
+VB_TAB2 = VB_TAB4 + TAB_N
+VB_SIZE = VB_TAB2 + TAB_N
 P_VALVE_R = P_VALVE_L + VB_SIZE
 # coupling and loads (appended: the indices above are those of the paper-only twin)
 # rotary.plumbing: 0 = paper (motor port B -> silencer), 1 = bidirectional (B -> valve port 2)
@@ -226,14 +228,31 @@ def iso_flow(p1, p2, K, b, b_lam):
 
 
 @njit(**_JIT)
-def area_fraction(prm, base, du):
-    """Opening area / A_max at |u − 5 V| = du (linear interpolation of the table)."""
-    q = du / TAB_DU
+def port_flow(prm, off, y):
+    """A port's signed normalised flow at effective opening y (V): linear interpolation of
+    its table at ``prm[off:off + TAB_N]`` (0-10 V; held flat beyond)."""
+    q = y / TAB_DU
+    if q <= 0.0:
+        return prm[off]
     if q >= TAB_N - 1:
-        return prm[base + VB_TAB + TAB_N - 1]
+        return prm[off + TAB_N - 1]
     i = int(q)
     w = q - i
-    return prm[base + VB_TAB + i] * (1.0 - w) + prm[base + VB_TAB + i + 1] * w
+    return prm[off + i] * (1.0 - w) + prm[off + i + 1] * w
+
+
+@njit(**_JIT)
+def port_areas(f, a_max, a_leak, f_lap):
+    """(supply → port, port → exhaust) areas of a port whose signed normalised flow is f.
+
+    The opening path: a_leak + |f| a_max; the closing one leaks a_leak, fading out as
+    |f| passes f_lap (both leak inside a dead band, where f = 0).
+    """
+    if f >= 0.0:
+        fade = 1.0 - f / f_lap
+        return a_leak + f * a_max, (a_leak * fade if fade > 0.0 else 0.0)
+    fade = 1.0 + f / f_lap
+    return (a_leak * fade if fade > 0.0 else 0.0), a_leak - f * a_max
 
 
 @njit(**_JIT)
@@ -242,20 +261,15 @@ def valve_areas(prm, base, y):
 
     Returns (A_s4, A_4e, A_s2, A_2e): supply→port 4 (chamber 1 / motor port A),
     port 4→exhaust, supply→port 2 (chamber 2 / motor port B in bidirectional
-    plumbing), port 2→exhaust. u > 5 V opens
-    supply→4 and 2→exhaust; u < 5 V the reverse. Every path leaks A_leak at the
-    centre; on the closing paths the leak fades out over the first table step.
+    plumbing), port 2→exhaust, from each port's own curve (the catalogue's:
+    u > 5 V opens supply→4 and 2→exhaust, u < 5 V the reverse) and the centre leak.
     """
-    d = y - 5.0
-    ad = abs(d)
     a_max = prm[base + VB_AMAX]
     a_leak = prm[base + VB_ALEAK]
-    a_open = a_leak + area_fraction(prm, base, ad) * a_max
-    fade = 1.0 - ad / prm[base + VB_DULAP]
-    a_close = a_leak * fade if fade > 0.0 else 0.0
-    if d >= 0.0:
-        return a_open, a_close, a_close, a_open
-    return a_close, a_open, a_open, a_close
+    f_lap = prm[base + VB_FLAP]
+    A_s4, A_4e = port_areas(port_flow(prm, base + VB_TAB4, y), a_max, a_leak, f_lap)
+    A_s2, A_2e = port_areas(port_flow(prm, base + VB_TAB2, y), a_max, a_leak, f_lap)
+    return A_s4, A_4e, A_s2, A_2e
 
 
 @njit(**_JIT)

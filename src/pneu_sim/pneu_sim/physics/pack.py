@@ -1,7 +1,7 @@
 """PlantParams -> the flat float64 parameter vector of :mod:`pneu_sim.physics.kernel`.
 
 Also the derived values the YAML does not hold: the valve's maximum area from its
-nominal flow, the spool's exact ZOH matrices, the resampled opening table.
+nominal flow, the spool's exact ZOH matrices, each port's flow curve sampled on the kernel's grid.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import numpy as np
 
 from pneu_sim.physics import kernel as k
 from pneu_sim.physics.params import PLUMBINGS, LoadParams, PlantParams, ValveParams
+from pneu_sim.physics.valve_curve import leak_fade_flow, port_tables
 
 __all__ = ["pack_params", "pack_load", "valve_max_area", "spool_zoh", "nominal_flow_per_area"]
 
@@ -63,10 +64,9 @@ def _valve_block(v: ValveParams, C_1: float, h: float) -> np.ndarray:
     blk[k.VB_B] = v.b
     blk[k.VB_BLAM] = v.b_lam
     blk[k.VB_HW] = 0.5 * v.hysteresis
-    blk[k.VB_DULAP] = v.du_table[1]
+    blk[k.VB_FLAP] = leak_fade_flow(v.flow_table)
     blk[k.VB_PHI11 : k.VB_G2 + 1] = spool_zoh(v.omega_n, v.zeta, h)
-    grid = np.arange(k.TAB_N) * k.TAB_DU
-    blk[k.VB_TAB :] = np.interp(grid, np.asarray(v.du_table), np.asarray(v.flow_table))
+    blk[k.VB_TAB4 : k.VB_TAB2], blk[k.VB_TAB2 :] = port_tables(v)
     return blk
 
 

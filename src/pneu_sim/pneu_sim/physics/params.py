@@ -26,6 +26,8 @@ from pneu_driver.daq.rig import ROTARY_PLUMBINGS
 from pneu_msgs_py.contract.valve_chart import MPYE_DU_V, MPYE_FLOW
 from pneu_msgs_py.params.core import ParamError, param
 
+from pneu_sim.physics.valve_curve import check_curve
+
 __all__ = [
     "AmbientParams",
     "SupplyParams",
@@ -332,12 +334,33 @@ class ValveParams:
         desc="normalised flow (= area fraction) at du_table",
         source="Festo MPYE flow-vs-setpoint chart, digitised (" + _PLANT_SHEET + ")",
     )
+    u_curve: tuple[float, ...] = param(
+        (),
+        unit="V",
+        desc="breakpoints (valve command) of the valve's own flow curve; empty: the catalogue's"
+        " (du_table, flow_table) mirrored about 5 V",
+        source="none: the catalogue curve (du_table, flow_table); pneu identify measures one",
+    )
+    flow_4: tuple[float, ...] = param(
+        (),
+        unit="-",
+        desc="port 4's normalised flow at u_curve, signed (+ supply -> port 4, - port 4 ->"
+        " exhaust; of the full-open flow Q_n), non-decreasing",
+        source="none: the catalogue curve (du_table, flow_table); pneu identify measures one",
+    )
+    flow_2: tuple[float, ...] = param(
+        (),
+        unit="-",
+        desc="port 2's normalised flow at u_curve, signed (+ supply -> port 2, - port 2 ->"
+        " exhaust; of the full-open flow Q_n), non-increasing",
+        source="none: the catalogue curve (du_table, flow_table); pneu identify measures one",
+    )
     leak_fraction: float = param(
         0.01,
         unit="-",
         lo=0.0,
         hi=0.1,
-        desc="centre leakage area per path / max area (fades out on the closing paths over the first table step)",
+        desc="centre leakage area per path / max area (on a closing path it fades out as the port's opening path passes flow_table's first step)",
         source="estimated: gives ≈ 9 l/min ANR at 6 bar with ports blocked, under the datasheet maximum of 20 l/min (LF); range: a tight new valve (≈ 2 l/min) to the datasheet maximum 20 l/min",
         band=(0.002, 0.022),
     )
@@ -385,6 +408,9 @@ class ValveParams:
             raise ParamError("du_table", list(du), "strictly increasing from 0 to at most 5 V")
         if fl[0] != 0.0 or fl[-1] != 1.0 or any(b < a for a, b in itertools.pairwise(fl)):
             raise ParamError("flow_table", list(fl), "non-decreasing from 0 to 1")
+        bad = check_curve(self.u_curve, self.flow_4, self.flow_2)
+        if bad is not None:
+            raise ParamError(*bad)
 
 
 @dataclass(frozen=True)

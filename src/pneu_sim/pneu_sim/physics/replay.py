@@ -14,16 +14,19 @@ means something:
 
 The dynamics are the kernel's own ``substep`` (one copy of the physics); the
 applied voltages go through the same AO clamp and quantisation
-(:func:`pneu_sim.physics.kernel.ao_value`).
+(:func:`pneu_sim.physics.kernel.ao_value`). The compiled functions inline the
+kernel: their cache is dropped when it changes (:mod:`pneu_sim.physics.jit_cache`).
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit, prange
 
+from pneu_sim.physics import jit_cache
 from pneu_sim.physics import kernel as k
 from pneu_sim.physics.pack import pack_params
 from pneu_sim.physics.params import PlantParams
@@ -345,3 +348,14 @@ def replay_segments(
     out = np.empty((int(n.sum()), N_REPLAY))
     _replay_segments(st, prm, u_l, u_r, i0, n, rows, out, AXES_CODE[axes], pc)
     return out
+
+
+# the compiled functions above inline the kernel (another file): keep their caches in step
+for _name, _fn in (
+    ("_run", _run),
+    ("_replay", _replay),
+    ("_replay_segments", _replay_segments),
+    ("_spools", _spools),
+    ("_exhaust_pressure", _exhaust_pressure),
+):
+    jit_cache.refresh_cache(_fn, (Path(__file__), Path(k.__file__)), f"replay.{_name}")
