@@ -266,6 +266,11 @@ def validate(obj: Any, prefix: str = "") -> Any:
             checked = _check_value(key, value, hints[f.name], f.metadata)
             if checked != value or type(checked) is not type(value):
                 object.__setattr__(obj, f.name, checked)
+    return _checked(obj, prefix)
+
+
+def _checked(obj: Any, prefix: str) -> Any:
+    """``obj`` after its own ``_check()`` (a cross-field rule), errors named under ``prefix``."""
     check = getattr(obj, "_check", None)
     if check is not None:
         try:
@@ -312,8 +317,8 @@ def from_dict(cls: type, data: Mapping[str, Any], *, strict: bool = True, prefix
             kwargs[name] = from_dict(tp, value, strict=strict, prefix=f"{key}.")
         else:
             kwargs[name] = _check_value(key, value, tp, f.metadata)
-    obj = cls(**kwargs)
-    return validate(obj, prefix=prefix)
+    # every field was checked above, every group by its own from_dict: the own rule remains
+    return _checked(cls(**kwargs), prefix)
 
 
 def to_dict(obj: Any) -> dict[str, Any]:
@@ -355,19 +360,52 @@ def _flatten_dict(d: Mapping[str, Any], prefix: str) -> dict[str, Any]:
 def with_updates(obj: Any, updates: Mapping[str, Any]) -> Any:
     """A new validated object with dotted-name ``updates`` applied as one set.
 
-    Raises :class:`ParamError` naming the first bad key; ``obj`` is unchanged.
+    Raises :class:`ParamError` naming the first bad key; ``obj`` is unchanged. Only the
+    groups on the updated keys' paths are rebuilt (their fields checked, their ``_check()``
+    run, innermost first); the others are ``obj``'s own, already validated.
     """
-    nested = to_dict(obj)
-    known = flatten(obj)
+    known = _leaf_names(type(obj))
+    tree = _Group()
     for key, value in updates.items():
         if key not in known:
             raise ParamError(key, value, unknown_key(key, known))
-        node = nested
+        node = tree
         parts = key.split(".")
         for part in parts[:-1]:
-            node = node[part]
+            node = node.setdefault(part, _Group())
         node[parts[-1]] = value
-    return from_dict(type(obj), nested, strict=True)
+    return _rebuilt(obj, tree, "")
+
+
+class _Group(dict):
+    """The updates of one group, by field name (a leaf's value may itself be a mapping)."""
+
+
+def _rebuilt(obj: Any, tree: _Group, prefix: str) -> Any:
+    hints = _field_types(type(obj))
+    fields = {f.name: f for f in dataclasses.fields(obj)}
+    changes: dict[str, Any] = {}
+    for name, value in tree.items():
+        key = f"{prefix}{name}"
+        if isinstance(value, _Group):
+            changes[name] = _rebuilt(getattr(obj, name), value, f"{key}.")
+        else:
+            changes[name] = _check_value(key, value, hints[name], fields[name].metadata)
+    return _checked(dataclasses.replace(obj, **changes), prefix)
+
+
+@functools.lru_cache(maxsize=None)
+def _leaf_names(cls: type) -> tuple[str, ...]:
+    """The dotted names of ``cls``'s leaves (what :func:`flatten` of an instance names)."""
+    out: list[str] = []
+    hints = _field_types(cls)
+    for f in dataclasses.fields(cls):
+        tp = _base_type(hints[f.name])
+        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+            out.extend(f"{f.name}.{n}" for n in _leaf_names(tp))
+        else:
+            out.append(f.name)
+    return tuple(out)
 
 
 def describe(cls_or_obj: Any, prefix: str = "") -> list[ParamSpec]:
