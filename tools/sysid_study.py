@@ -37,11 +37,20 @@ def _retolerate(result: dict) -> dict:
     """``result`` scored against the tolerances of the code as it is now (a study.json keeps
     the ones it ran with)."""
     for p in result["parameters"]:
+        if p["name"] not in TOLERANCE and not p["name"].startswith("noise σ"):
+            continue  # a curve's row: its own tolerance
         kind, tol = TOLERANCE["noise.x" if p["name"] == "noise σ x" else "noise.p" if p["name"].startswith("noise σ") else p["name"]]  # fmt: skip
         d = p["identified"] - p["truth"]
         p["error"] = d / p["truth"] if kind == "rel" else d
         p["tolerance"], p["within"] = [kind, tol], abs(p["error"]) <= tol
     return result
+
+
+def _covered(rows: list[dict]) -> str:
+    """'covered / with an interval' of ``rows``."""
+    return (
+        f"{sum(p['covered'] is True for p in rows)} / {sum(p['covered'] is not None for p in rows)}"
+    )
 
 
 def _summary(results: list[dict]) -> str:
@@ -62,7 +71,7 @@ def _summary(results: list[dict]) -> str:
         unexpl = sum(1 for n in r.get("notes", []) if "not explained" in n)
         lines.append(
             f"| {r['plant']} | {kind} | {sum(p['within'] for p in rows)} / {len(rows)} | "
-            f"{sum(p['covered'] for p in rows)} / {len(rows)} | {fits} | {warn} | "
+            f"{_covered(rows)} | {fits} | {warn} | "
             f"{unexpl or '—'} | {r['times_s'].get('identify', 0):.0f} |"
         )
     return "\n".join(lines) + "\n"
@@ -79,7 +88,7 @@ def _coverage(results: list[dict]) -> str:
         "| structural: within tol. / covered / taken | worst error (plant) |",
         "|---|---|---|---|",
     ]
-    tot = {k: [0, 0, 0] for k in ("in", "st")}
+    tot = {k: [0, 0, 0, 0] for k in ("in", "st")}
     for n in names:
         cells = {}
         worst = (0.0, "")
@@ -91,9 +100,11 @@ def _coverage(results: list[dict]) -> str:
                 for p in r["parameters"]
                 if p["name"] == n and p["taken"]
             ]
-            c = [sum(p["within"] for p in rows), sum(p["covered"] for p in rows), len(rows)]
+            c = [sum(p["within"] for p in rows), sum(p["covered"] is True for p in rows)]
+            c += [len(rows), sum(p["covered"] is not None for p in rows)]  # taken, with an interval
             tot[k] = [a + b for a, b in zip(tot[k], c)]
-            cells[k] = f"{c[0]} / {c[1]} / {c[2]}" if rows else "—"
+            cov = str(c[1]) if c[3] == c[2] else "—" if not c[3] else f"{c[1]} of {c[3]}"
+            cells[k] = f"{c[0]} / {cov} / {c[2]}" if rows else "—"
         for r in results:
             for p in r["parameters"]:
                 if p["name"] == n and p["taken"] and abs(p["error"]) / p["tolerance"][1] > worst[0]:
@@ -102,14 +113,14 @@ def _coverage(results: list[dict]) -> str:
                     worst = (abs(p["error"]) / p["tolerance"][1], f"{e:+.3g}{unit} ({r['plant']})")
         lines.append(f"| {n} | {cells['in']} | {cells['st']} | {worst[1] or '—'} |")
     for k, label in (("in", "in model"), ("st", "structural")):
-        w, c, t = tot[k]
+        w, c, t, n = tot[k]
         if t:
             lines.append(
                 f"| **all, {label}** | within {w} / {t} ({100 * w / t:.0f} %), "
-                f"covered {c} / {t} ({100 * c / t:.0f} %) | | |"
+                f"covered {c} / {n} ({100 * c / max(n, 1):.0f} %) | | |"
             )
     w = tot["in"][1] + tot["st"][1]
-    t = tot["in"][2] + tot["st"][2]
+    t = tot["in"][3] + tot["st"][3]
     if t:
         lines.append(f"| **all plants: covered** | {w} / {t} ({100 * w / t:.0f} %) | | |")
     return "\n".join(lines) + "\n"
@@ -123,7 +134,7 @@ def _cell(p: dict) -> str:
         return "kept (n.i.)"
     e = f"{100 * p['error']:+.1f} %" if p["tolerance"][0] == "rel" else f"{p['error']:+.3f}"
     e = e if p["within"] else f"**{e}**"
-    return e if p["covered"] else e + " ✗"
+    return e if p["covered"] is not False else e + " ✗"
 
 
 def _calibration(results: list[dict]) -> str:

@@ -394,7 +394,7 @@ def _rebuilt(obj: Any, tree: _Group, prefix: str) -> Any:
     return _checked(dataclasses.replace(obj, **changes), prefix)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _leaf_names(cls: type) -> tuple[str, ...]:
     """The dotted names of ``cls``'s leaves (what :func:`flatten` of an instance names)."""
     out: list[str] = []
