@@ -40,7 +40,12 @@ FIGURES = (
     "shell_us_per_sample",
     "loop_on_time_ratio",
     "loop_jitter_us_p99",
+    "identify_s_structural",
+    "identify_cpu_s_structural",
+    "identify_s_in_model",
+    "identify_cpu_s_in_model",
 )
+SLOW_GROUPS = ("identify",)  # minutes: only with --only
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -86,8 +91,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "analysis",
             "shell",
             "loop",
+            "identify",
         ),
-        help="run only these groups (repeatable)",
+        help="run only these groups (repeatable); identify (minutes: one quick excitation "
+        "identified, two plants) runs only when named",
     )
     p.add_argument("--quick", action="store_true", help="shorter runs (smoke check of the bench)")
 
@@ -181,6 +188,11 @@ def _groups(quick: bool) -> dict[str, Callable[[], dict[str, Any]]]:
 
         return loop_pacing(duration_s=2.0 if quick else 10.0)
 
+    def identify() -> dict[str, Any]:
+        from pneu_control.bench.identify import identify_figures
+
+        return identify_figures(("structural",) if quick else ("structural", "in_model"))
+
     return {
         "plant": plant,
         "closed_loop": closed_loop,
@@ -190,6 +202,7 @@ def _groups(quick: bool) -> dict[str, Callable[[], dict[str, Any]]]:
         "analysis": analysis,
         "shell": shell,
         "loop": loop,
+        "identify": identify,
     }
 
 
@@ -308,7 +321,7 @@ def run(args: argparse.Namespace) -> int:
     results: dict[str, Any] = {"machine": machine()}
     groups = _groups(args.quick)
     for name, fn in groups.items():
-        if args.only and name not in args.only:
+        if (args.only and name not in args.only) or (not args.only and name in SLOW_GROUPS):
             continue
         print(f"  bench {name} ...", file=sys.stderr)
         try:
