@@ -117,6 +117,13 @@ class CurveSupport:
     samples: int = 0  # valid samples with the command inside the fitted range
     segments: dict[str, int] = field(default_factory=dict)  # design segment kind -> count
 
+    def fitted_range(self) -> dict[str, tuple[float, float]]:
+        """port -> (lo, hi) V: the voltages its fitted knots span (the dead band's edges if
+        none)."""
+        return {
+            p: (self.reach.get((p, "-"), 5.0), self.reach.get((p, "+"), 5.0)) for p in self.ports
+        }
+
     def text(self) -> str:
         """One phrase: the range fitted and what it rests on."""
         kinds = ", ".join(f"{n} {k}" for k, n in sorted(self.segments.items())) or "no design"
@@ -293,15 +300,30 @@ def own_curve_plant(plant, axis: str, estimate: dict | None = None):
     return with_updates(plant, upd)
 
 
-def max_error(a, b, valve: str, ports: tuple[str, ...] = ("4", "2")) -> float:
+def max_error(
+    a,
+    b,
+    valve: str,
+    ports: tuple[str, ...] = ("4", "2"),
+    within: dict[str, tuple[float, float]] | None = None,
+    outside: bool = False,
+) -> float:
     """max over 0-10 V and ``ports`` of |flow of ``a`` − flow of ``b``|, as a fraction of
-    ``b``'s full flow (each curve scaled by its valve's Q_n)."""
+    ``b``'s full flow (each curve scaled by its valve's Q_n). ``within``: port -> (lo, hi)
+    V, only there -- or, ``outside``, only outside it (0 where that leaves no voltage)."""
     va, vb = getattr(a, valve), getattr(b, valve)
     g = grid()
     worst = 0.0
     for port in ports:
-        fa = _g(va, port, g) * va.Q_n / vb.Q_n
-        fb = _g(vb, port, g)
+        m = np.ones(g.shape, dtype=bool)
+        if within is not None:
+            lo, hi = within[port]
+            m = (g >= lo) & (g <= hi)
+            m = ~m if outside else m
+        if not m.any():
+            continue
+        fa = _g(va, port, g[m]) * va.Q_n / vb.Q_n
+        fb = _g(vb, port, g[m])
         worst = max(worst, float(np.max(np.abs(fa - fb))))
     return worst if math.isfinite(worst) else math.inf
 
