@@ -433,14 +433,20 @@ def test_every_page_has_one_title(path):
 
 
 def test_calibration_tables_are_the_studys_parameters_tolerances_and_plants():
-    from pneu_control.sysid.study import PERTURBATIONS, TOLERANCE
+    from pneu_control.sysid.study import CURVE_TOLERANCE, PERTURBATIONS, TOLERANCE
 
     text = _section(
         ROOT / "docs" / "calibration.md",
         "# Calibrating the twin on a rig: excite → identify → validate → tune",
     )
-    errors = [r for r in _table_rows(text) if re.fullmatch(r"[\w. σ]+ \(±[\d.]+( %)?\)", r[0])]
+    rows = [r for r in _table_rows(text) if re.fullmatch(r"[\w. σΔ]+ \(±[\d.]+( %)?\)", r[0])]
+    curves = [r for r in rows if ".curve " in r[0]]  # a valve's own curve, where fitted and beyond
+    errors = [r for r in rows if r not in curves]
     assert len(errors) == len(TOLERANCE) + 2  # noise σ of p_c1, p_c2 and p_m1 share noise.p
+    for cells in curves:
+        assert re.fullmatch(r"valve_(linear|rotary)\.curve worst Δf (where fitted|beyond the data) \(±[\d.]+\)", cells[0]), cells[0]  # fmt: skip
+        assert math.isclose(float(cells[0].split("(±")[1][:-1]), CURVE_TOLERANCE), cells[0]
+        assert len(cells) == 1 + len(PERTURBATIONS), cells[0]
     for cells in errors:
         name, tol = re.fullmatch(r"(.+) \(±([\d.]+(?: %)?)\)", cells[0]).groups()
         key = {"noise σ x": "noise.x"}.get(

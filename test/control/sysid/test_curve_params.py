@@ -135,3 +135,26 @@ def test_the_chambers_measure_the_valve_curve_at_known_volume():
         assert have.sum() >= 8, port  # the null and the four sizes either way
         assert err.max() <= 0.02, (port, u[have][np.argmax(err)], err.max())
         assert np.any(u[have] < 4.0) and np.any(u[have] > 6.0)
+
+
+def test_the_curve_error_splits_where_fitted_and_beyond():
+    # a valve whose port-4 flow differs from the catalogue's only above 8 V: inside 3-7 V
+    # the curves agree, beyond they do not (by 0.05 of full flow per volt above 8 V)
+    base = PlantParams()
+    u, f4, f2 = port_curves(base.valve_linear)
+    f4b = np.where(u > 8.0, f4 - 0.05 * (u - 8.0), f4)
+    other = with_updates(
+        base,
+        {
+            "valve_linear.u_curve": tuple(float(x) for x in u),
+            "valve_linear.flow_4": tuple(float(x) for x in f4b),
+            "valve_linear.flow_2": tuple(float(x) for x in f2),
+        },
+    )
+    fitted = {"4": (3.0, 7.0), "2": (3.0, 7.0)}
+    whole = curve.max_error(other, base, "valve_linear")
+    inside = curve.max_error(other, base, "valve_linear", within=fitted)
+    beyond = curve.max_error(other, base, "valve_linear", within=fitted, outside=True)
+    assert whole > 0.05
+    assert inside == pytest.approx(0.0, abs=1e-9)
+    assert beyond == pytest.approx(whole)
