@@ -214,11 +214,11 @@ def _fit_own_curve(axis, base, records, options, fit: AxisFit, log):
     )
     offs = {f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()}
     own = prob.solve(offs, log)
-    # Kept only when the lower cost pays for the values added (Schwarz's criterion, BIC, on
-    # the effective sample: the residuals over their autocorrelation time, the larger of
-    # the two fits'): a cost merely lower is what 30 knots find in noise and in what the
-    # catalogue family explains otherwise (the study's breakaway plant: -11 %, and a
-    # mismatch warning held out).
+    # Kept only when the lower cost pays for the values added: Schwarz's criterion (BIC;
+    # Schwarz, Ann. Statist. 6, 1978) on the effective sample, the residuals over their
+    # autocorrelation time (the larger of the two fits'). A cost merely lower is what 30
+    # knots find in noise and in what the catalogue family explains otherwise (the study's
+    # breakaway plant: -11 %, and a mismatch warning held out).
     dp = len(own.names) - len(fit.names)
     m_eff = own.n_residuals / max(fit.inflation, own.inflation, 1.0)
     gain = m_eff * math.log(fit.cost / own.cost) if own.cost > 0 else math.inf
