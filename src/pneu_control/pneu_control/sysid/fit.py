@@ -98,6 +98,14 @@ class AxisFit:
     fit_params: tuple = ()  # the FitParams of ``names`` (model.FitParam)
     curve_support: object = None  # what the data inform of the valve's own curve (curve stage)
 
+    def offset_start(self) -> dict[str, float]:
+        """The sensor offsets as start values (``offset:<record>:<signal>`` -> Pa)."""
+        return {f"offset:{r}:{k}": v for r, o in self.offsets.items() for k, v in o.items()}
+
+    def start(self) -> dict[str, float]:
+        """The fitted values and offsets as a start (:meth:`Problem.z_start`)."""
+        return {**dict(zip(self.names, self.value)), **self.offset_start()}
+
     def ci95(self, i: int) -> float:
         """95 % half-width of parameter ``i`` (q95 σ), in its unit."""
         return self.q95 * self.sigma[i]
@@ -160,7 +168,7 @@ def fit_axis(
     options = options or FitOptions()
     fit = _staged_fit(axis, base, records, options, log, stage)
     full = Problem(axis, base, records, replace(options, params=tuple(fit.names)))
-    check = groups.check_segments(full, full.z_start(_start_of(fit)))
+    check = groups.check_segments(full, full.z_start(fit.start()))
     start = groups.refit_unexplained(axis, base, records, options, fit, check, log)
     if start is not None:
         log(f"  {axis}: global stage: every parameter again, from there")
@@ -168,13 +176,13 @@ def fit_axis(
         log(f"  {axis}: cost {again.cost:.5g} there, {fit.cost:.5g} before")
         if again.cost < fit.cost:
             fit = replace(again, cost_start=fit.cost_start)
-            check = groups.check_segments(full, full.z_start(_start_of(fit)))
+            check = groups.check_segments(full, full.z_start(fit.start()))
     if options.curve and f"valve_{axis}.Q_n" in fit.names:
         stage()
         own = _fit_own_curve(axis, base, records, options, fit, log)
         if own is not None:
             fit, prob = own
-            check = groups.check_segments(prob, prob.z_start(_start_of(fit)))
+            check = groups.check_segments(prob, prob.z_start(fit.start()))
     return replace(fit, unexplained=check.lines(axis))
 
 
@@ -212,7 +220,7 @@ def _fit_own_curve(axis, base, records, options, fit: AxisFit, log):
         replace(options, params=(*others, *(p.name for p in knots))),
         extra=knots,
     )
-    offs = {f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()}
+    offs = fit.offset_start()
     own = prob.solve(offs, log)
     # Kept only when the lower cost pays for the values added: Schwarz's criterion (BIC;
     # Schwarz, Ann. Statist. 6, 1978) on the effective sample, the residuals over their
@@ -259,13 +267,6 @@ def _settling_groups(axis: str, names, mech) -> list[tuple[str, ...]]:
     return [g for g in (vol, rest) if g]
 
 
-def _start_of(fit: AxisFit) -> dict[str, float]:
-    """``fit``'s values and offsets as a start."""
-    out = dict(zip(fit.names, fit.value))
-    out.update({f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()})
-    return out
-
-
 def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
     """Fit ``axis``'s parameters of ``base`` (PlantParams) to ``records`` with the valve's curve
     a shift and scale of the catalogue's.
@@ -296,7 +297,7 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
         for group in _settling_groups(axis, names, mech):
             log(f"  {axis}: stage 2a, {', '.join(group)} (the mechanics pinned)")
             held = Problem(axis, base1, records, replace(options, params=group)).solve(start, log)
-            start = {**start, **_start_of(held)}
+            start = {**start, **held.start()}
     start.update(mech)
     stage()
     log(f"  {axis}: stage 2, every parameter")
@@ -311,7 +312,7 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
     others = [p for p in model.AXIS_PARAMS[axis] if p.name in names and p.name not in first]
     fitted = dict(zip(fit.names, fit.value))
     base2 = model.apply(base, tuple(others), [fitted[p.name] for p in others])
-    offs = {f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()}
+    offs = fit.offset_start()
     stage()
     log(f"  {axis}: stage 1 again, the other parameters as fitted")
     start2, cost2 = _flow_curve_start(axis, base2, records, options, first, offs, log)

@@ -99,8 +99,7 @@ def refit_unexplained(
     picked = [(r, sel) for r, sel in picked if sel is not None]
     if not picked:
         return None
-    start = {**dict(zip(fit.names, fit.value))}
-    start.update({f"offset:{r}:{k}": v for r, o in fit.offsets.items() for k, v in o.items()})
+    start = fit.start()
     opts = replace(options, params=tuple(fit.names))
     try:
         subs = [Problem(axis, base, [r], opts, select=sel) for r, sel in picked]
