@@ -40,3 +40,45 @@ def test_the_record_memo_changes_no_replay(bag, axis, segment_s):
     fresh = shooting.simulate(other, load_record(bag), seg, offs2, axis)
     assert _same(cached, fresh)
     assert not _same(cached, first)
+
+
+@pytest.mark.parametrize("axis", ["linear", "rotary"])
+def test_the_shared_jacobian_is_least_squares_own_to_the_bit(bag, axis, monkeypatch):
+    """Problem.jacobian restarts each column's replay where its change can first act: on a
+    problem with curve knots, offsets and physical values, it equals scipy's 2-point
+    Jacobian of the residuals (what least_squares computes with jac="2-point") exactly, and
+    replays fewer periods than a replay per column."""
+    from pneu_control.sysid import curve
+    from pneu_control.sysid.fit import FitOptions, Problem
+    from pneu_sim.physics import replay as rp
+    from scipy.optimize._numdiff import approx_derivative
+
+    rec = load_record(bag)
+    start = curve.own_curve_plant(PlantParams(), axis)
+    knots, _sup = curve.fit_params(axis, start, [rec])
+    assert sum("@+" in p.name or "@-" in p.name for p in knots) >= 4
+    others = ("linear.A_f", "linear.c_v") if axis == "linear" else ("rotary.J_m", "rotary.k_leak")
+    opt = FitOptions(params=(*others, *(p.name for p in knots)))
+    prob = Problem(axis, start, [rec], opt, extra=knots)
+    rng = np.random.default_rng(3)
+    z = np.clip(rng.normal(0.0, 0.3, prob.n_p + prob.n_off), prob.lo, prob.hi)
+    z[-1] = prob.hi[-1]  # a coordinate at its bound: the step turns inward, as scipy's
+    periods = []
+    real = rp.replay_segments
+
+    def counted(*args, **kw):
+        periods.append(int(np.sum(args[5])))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(rp, "replay_segments", counted)
+    fast = prob.jacobian(z)
+    monkeypatch.undo()
+    ref = approx_derivative(
+        prob.residuals, z, method="2-point", rel_step=opt.diff_step, f0=prob.residuals(z),
+        bounds=(prob.lo, prob.hi),
+    )  # fmt: skip
+    assert fast.shape == ref.shape and np.array_equal(fast, ref)
+    assert np.count_nonzero(ref[:, prob.n_p - 1]) > 0  # the outermost knot has an effect
+    whole = sum(s.lengths.sum() for _r, s in prob.used)
+    assert periods[0] == whole and len(periods) <= 1 + prob.n_p + prob.n_off
+    assert sum(periods) < 0.9 * (1 + prob.n_p + prob.n_off) * whole

@@ -174,3 +174,62 @@ def test_segments_in_parallel_are_the_one_by_one_replays(axes):
     assert np.array_equal(states, kept)  # the start states are not modified
     with pytest.raises(ValueError, match="inside the voltages"):
         rp.replay_segments(states, prm, ul, ur, starts + 1000, lengths, axes, pc)
+
+
+@pytest.mark.parametrize("axes", ["both", "linear", "rotary"])
+def test_a_segment_restarted_from_its_trace_replays_the_same_bits(axes):
+    """The state kept for each period (trace) starts the rest of a segment again, exactly."""
+    prm = rp.replay_params(PlantParams())
+    rng = np.random.default_rng(8)
+    n = 2000
+    ul = 5.0 + np.repeat(rng.uniform(-1.5, 1.5, n // 40), 40)
+    ur = 5.5 + np.repeat(rng.uniform(-0.3, 0.6, n // 40), 40)
+    st = np.zeros(k.N_STATE)
+    st[[k.S_PC1, k.S_PC2, k.S_PM1, k.S_PM2]] = [2.5e5, 2.0e5, 1.5e5, 1.1e5]
+    st[[k.S_SL, k.S_YL, k.S_SR, k.S_YR]] = [5.0, 5.0, 5.5, 5.5]
+    starts, lengths = np.array([5, 1100]), np.array([900, 850])
+    pc = np.column_stack([np.full(n, 2.4e5), np.full(n, 2.1e5)]) if axes == "rotary" else None
+    trace = np.full((lengths.sum(), k.N_STATE), np.nan)
+    whole = rp.replay_segments(np.array([st, st]), prm, ul, ur, starts, lengths, axes, pc, trace)
+    assert np.array_equal(whole, rp.replay_segments(np.array([st, st]), prm, ul, ur, starts, lengths, axes, pc))  # fmt: skip
+    assert np.array_equal(trace[0], st) and np.array_equal(trace[900], st)
+    for j in (1, 333, 899):
+        again = rp.replay_segments(trace[j][None], prm, ul, ur, starts[:1] + j, lengths[:1] - j, axes, pc)  # fmt: skip
+        assert np.array_equal(again, whole[j:900])
+    with pytest.raises(ValueError, match="trace"):
+        rp.replay_segments(np.array([st, st]), prm, ul, ur, starts, lengths, axes, pc, trace[:5])
+
+
+def test_the_opening_envelope_bounds_every_substep_s_opening():
+    p = PlantParams()
+    prm = rp.replay_params(p)
+    u = 5.0 + np.repeat([0.0, 2.0, -0.7, 0.03, 0.0, 4.9], 15)
+    env = rp.opening_envelope(prm, "linear", u)
+    st = np.zeros(k.N_STATE)
+    st[k.S_SL] = st[k.S_YL] = 5.0
+    for i in range(len(u)):
+        ys = []
+        for _ in range(p.sim.n_sub):
+            ys.append(k.spool_step.py_func(st, prm, k.P_VALVE_L, k.S_SL, k.S_SDL, k.S_YL, k.ao_value(prm, u[i])))  # fmt: skip
+        assert env[i].tolist() == [min(ys), max(ys)]
+    assert np.array_equal(rp.spool_trajectory(prm, "linear", u)[1:, 2], [min(max(y, lo), hi) for y, (lo, hi) in zip(rp.spool_trajectory(prm, "linear", u)[1:, 2], env[:-1])])  # fmt: skip
+
+
+def test_changed_openings_names_the_valve_and_the_voltages_its_changed_cells_are_read_at():
+    p = PlantParams()
+    prm = rp.replay_params(p)
+    assert rp.changed_openings(prm, prm.copy()) == ("linear", np.inf, -np.inf)
+    for axis, base in (("linear", k.P_VALVE_L), ("rotary", k.P_VALVE_R)):
+        other = prm.copy()
+        other[base + k.VB_TAB2 + 600 : base + k.VB_TAB2 + 650] += 1e-3  # port 2, 6.00-6.49 V
+        other[base + k.VB_TAB4 + 610] -= 1e-3
+        ax, lo, hi = rp.changed_openings(prm, other)
+        assert ax == axis and lo <= 5.99 and hi >= 6.50 and lo >= 5.9 and hi <= 6.6
+        other[base + k.VB_TAB4 + 1] += 1e-3  # by the first cell: read at any opening below
+        assert rp.changed_openings(prm, other)[1] == -np.inf
+    moved = prm.copy()
+    moved[k.P_VALVE_L + k.VB_ALEAK] *= 1.1  # the centre leak: every opening
+    assert rp.changed_openings(prm, moved) is None
+    both = prm.copy()
+    both[[k.P_VALVE_L + k.VB_TAB4 + 600, k.P_VALVE_R + k.VB_TAB4 + 600]] += 1e-3
+    assert rp.changed_openings(prm, both) is None

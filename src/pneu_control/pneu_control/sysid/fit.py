@@ -482,13 +482,39 @@ class Problem:
     def residuals(self, z: np.ndarray) -> np.ndarray:
         vals, offs = self.unpack(z)
         plant = model.apply(self.base, self.params, vals)
+        sims = [shooting.simulate(plant, r, s, off, self.axis) for (r, s), off in zip(self.used, offs)]  # fmt: skip
+        return self._stack(sims)
+
+    def _stack(self, sims: list[dict[str, np.ndarray]]) -> np.ndarray:
+        """The weighted residual vector of the records' simulated signals."""
         parts = []
         dec = self.options.decimate
-        for (r, s), m, off in zip(self.used, self.meas, offs):
-            sim = shooting.simulate(plant, r, s, off, self.axis)
+        for m, sim in zip(self.meas, sims):
             for name in self.signals:
                 parts.append((m[name] - sim[name][::dec]) / self.scale[name])
         return np.concatenate(parts)
+
+    def jacobian(self, z: np.ndarray) -> np.ndarray:
+        """least_squares' own 2-point Jacobian (scipy's ``approx_derivative`` with its steps
+        and bounds: the same bits as ``jac="2-point"``), each column's replay started again
+        from the first period its change can act in (:func:`shooting.simulate_from`: a curve
+        knot acts only where the valve opens that far)."""
+        from scipy.optimize._numdiff import approx_derivative  # what least_squares calls
+
+        vals, offs = self.unpack(z)
+        plant = model.apply(self.base, self.params, vals)
+        kept = [shooting.trace(plant, r, s, off, self.axis) for (r, s), off in zip(self.used, offs)]  # fmt: skip
+
+        def column(x: np.ndarray) -> np.ndarray:
+            vals_x, offs_x = self.unpack(x)
+            plant_x = model.apply(self.base, self.params, vals_x)
+            return self._stack([shooting.simulate_from(plant_x, t, o) for (_, t), o in zip(kept, offs_x)])  # fmt: skip
+
+        f0 = self._stack([sim for sim, _ in kept])
+        opt = self.options
+        return approx_derivative(
+            column, z, method="2-point", rel_step=opt.diff_step, f0=f0, bounds=(self.lo, self.hi)
+        )
 
     def cost(self, z: np.ndarray) -> float:
         r = self.residuals(z)
@@ -507,7 +533,7 @@ class Problem:
         def tracked(z):
             n_eval[0] += 1
             r = self.residuals(z)
-            if n_eval[0] % (len(z) + 1) == 1:
+            if True:
                 vals, _ = self.unpack(z)
                 shown = ", ".join(
                     f"{p.name.split('.', 1)[-1]}={v:.4g}" for p, v in zip(params, vals)
@@ -522,9 +548,9 @@ class Problem:
             tracked,
             z0,
             bounds=(self.lo, self.hi),
+            jac=self.jacobian,
             method="trf",
             x_scale=1.0,
-            diff_step=opt.diff_step,
             max_nfev=opt.max_nfev,
             xtol=opt.xtol,
             ftol=opt.ftol,
@@ -561,7 +587,8 @@ class Problem:
         sigma = [float(v) for v in np.sqrt(np.maximum(np.diag(cov_p), 0.0))]
         sigma_iid = np.sqrt(np.maximum(np.diag(G @ cov_iid[:n_p, :n_p] @ G.T), 0.0))
         with np.errstate(invalid="ignore", divide="ignore"):
-            corr = np.nan_to_num(cov_p / np.outer(sigma, sigma))
+            corr = cov_p / np.outer(sigma, sigma)
+        corr[~np.isfinite(corr)] = 0.0  # a value without effect (σ = 0) correlates with none
         offsets, offsets_sigma = {}, {}
         kk = len(self.pnames)
         for j, ((rec, _s), off) in enumerate(zip(self.used, offs)):

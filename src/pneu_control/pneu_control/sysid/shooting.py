@@ -26,7 +26,15 @@ from pneu_sim.physics import replay as rp
 
 from pneu_control.sysid.record import AXIS_SIGNALS, SIGNALS, Record
 
-__all__ = ["Segments", "initial_states", "segments_of", "simulate"]
+__all__ = [
+    "Segments",
+    "Trace",
+    "initial_states",
+    "segments_of",
+    "simulate",
+    "simulate_from",
+    "trace",
+]
 
 _COL = {"p_c1": rp.R_PC1, "p_c2": rp.R_PC2, "p_m1": rp.R_PM1, "x": rp.R_X, "theta": rp.R_TH, "omega": rp.R_OM}  # fmt: skip
 _X_FIT = 10  # samples either side for the position/velocity line at a segment start
@@ -183,12 +191,23 @@ def _spools(rec: Record, prm: np.ndarray, axis: str) -> np.ndarray:
     return rec.memo[key]
 
 
-def simulate(
-    params, rec: Record, seg: Segments, offsets: dict[str, float], axes: str = "both"
-) -> dict[str, np.ndarray]:
-    """Replay every segment (``axes``: both, linear or rotary); returns SIGNALS -> simulated
-    sensor values at :attr:`Segments.index` (pressures with ``offsets`` added back, as the
-    sensors read them)."""
+@dataclass
+class Trace:
+    """One replay of a record's segments kept whole (:func:`trace`): what a replay with other
+    values starts again from, where those values cannot have acted yet (:func:`simulate_from`)."""
+
+    rec: Record
+    seg: Segments
+    axes: str
+    prm: np.ndarray
+    states: np.ndarray  # (segments, N_STATE): each segment's start
+    sim: np.ndarray  # (Σ lengths, N_REPLAY): the replayed rows
+    period_states: np.ndarray  # (Σ lengths, N_STATE): the state each row's period starts from
+    rows: np.ndarray  # first row of each segment
+
+
+def _setup(params, rec: Record, seg: Segments, offsets: dict[str, float], axes: str):
+    """(prm, segment start states, the recorded cylinder pressures for a rotary replay)."""
     prm = rp.replay_params(params)
     kbar = rp.mean_vane_factor(prm)
     spools = {a: _spools(rec, prm, a) for a in ("linear", "rotary")}
@@ -197,10 +216,78 @@ def simulate(
     if axes == "rotary":  # the seal torque reads the cylinder's pressures: feed the recorded ones
         p_c = np.column_stack([rec.y[c] - offsets.get(c, 0.0) for c in ("p_c1", "p_c2")])
     st = np.array([rp.replay_state(prm, params, kbar=kbar, **s0) for s0 in states])
-    sim = rp.replay_segments(
-        st, prm, rec.u["linear"], rec.u["rotary"], seg.starts, seg.lengths, axes, p_c
-    )
+    return prm, st.reshape(len(seg), -1), p_c
+
+
+def _outputs(sim: np.ndarray, offsets: dict[str, float]) -> dict[str, np.ndarray]:
     out = {name: sim[:, _COL[name]] for name in SIGNALS}
     for name, off in offsets.items():
         out[name] = out[name] + off
     return out
+
+
+def simulate(
+    params, rec: Record, seg: Segments, offsets: dict[str, float], axes: str = "both"
+) -> dict[str, np.ndarray]:
+    """Replay every segment (``axes``: both, linear or rotary); returns SIGNALS -> simulated
+    sensor values at :attr:`Segments.index` (pressures with ``offsets`` added back, as the
+    sensors read them)."""
+    prm, st, p_c = _setup(params, rec, seg, offsets, axes)
+    sim = rp.replay_segments(
+        st, prm, rec.u["linear"], rec.u["rotary"], seg.starts, seg.lengths, axes, p_c
+    )
+    return _outputs(sim, offsets)
+
+
+def trace(
+    params, rec: Record, seg: Segments, offsets: dict[str, float], axes: str = "both"
+) -> tuple[dict[str, np.ndarray], Trace]:
+    """:func:`simulate`, and the replay kept whole (the same bits)."""
+    prm, st, p_c = _setup(params, rec, seg, offsets, axes)
+    n = int(seg.lengths.sum())
+    kept = np.empty((n, st.shape[1]))
+    sim = rp.replay_segments(
+        st, prm, rec.u["linear"], rec.u["rotary"], seg.starts, seg.lengths, axes, p_c, kept
+    )
+    rows = np.concatenate(([0], np.cumsum(seg.lengths)[:-1])).astype(np.int64)
+    return _outputs(sim, offsets), Trace(rec, seg, axes, prm, st, sim, kept, rows)
+
+
+def _envelope(rec: Record, prm: np.ndarray, axis: str) -> np.ndarray:
+    key = ("envelope", axis, rp.spool_key(prm, axis))
+    if key not in rec.memo:
+        rec.memo[key] = rp.opening_envelope(prm, axis, rec.u[axis])
+    return rec.memo[key]
+
+
+def simulate_from(params, base: Trace, offsets: dict[str, float]) -> dict[str, np.ndarray]:
+    """:func:`simulate` with other values, to the same bits, replaying each segment only from
+    the first period the change can act in: a change confined to a valve's flow curve acts
+    from the first period whose spool opening reads a changed cell of it (the spool depends
+    on nothing fitted); a segment whose start state changed, or any other change, replays
+    whole. The rows before are ``base``'s."""
+    rec, seg = base.rec, base.seg
+    prm, st, p_c = _setup(params, rec, seg, offsets, base.axes)
+    where = rp.changed_openings(base.prm, prm)
+    n = seg.lengths
+    first = np.zeros(len(seg), dtype=np.int64)
+    if where is not None:
+        axis, lo, hi = where
+        env = _envelope(rec, prm, axis)
+        hit = (env[:, 1] >= lo) & (env[:, 0] <= hi)
+        for s, (i0, ns) in enumerate(zip(seg.starts.tolist(), n.tolist())):
+            h = np.flatnonzero(hit[i0 : i0 + ns])
+            first[s] = h[0] if len(h) else ns
+    first[np.any(st != base.states, axis=1)] = 0
+    go = first < n
+    sim = base.sim.copy()
+    if go.any():
+        r0 = base.rows[go] + first[go]
+        start = np.where(first[go][:, None] == 0, st[go], base.period_states[r0])
+        part = rp.replay_segments(
+            start, prm, rec.u["linear"], rec.u["rotary"], seg.starts[go] + first[go],
+            n[go] - first[go], base.axes, p_c,
+        )  # fmt: skip
+        idx = np.concatenate([np.arange(a, a + m) for a, m in zip(r0, n[go] - first[go])])
+        sim[idx] = part
+    return _outputs(sim, offsets)

@@ -41,7 +41,9 @@ __all__ = [
     "N_REPLAY",
     "exhaust_pressure",
     "exhaust_pressures",
+    "changed_openings",
     "mean_vane_factor",
+    "opening_envelope",
     "replay",
     "replay_params",
     "replay_segments",
@@ -59,13 +61,17 @@ AXES_CODE = {"both": 0, "linear": 1, "rotary": 2}
 
 
 @njit(cache=True)
-def _run(st, prm, u_l, u_r, i0, n, out, o0, which, p_c, feed):
-    """Periods i0 .. i0+n-1 of the voltages from ``st`` (in place) into rows o0 .. of ``out``."""
+def _run(st, prm, u_l, u_r, i0, n, out, o0, which, p_c, feed, trace):
+    """Periods i0 .. i0+n-1 of the voltages from ``st`` (in place) into rows o0 .. of ``out``;
+    ``trace`` (unless empty): row o0 + j gets the state at the start of period i0 + j."""
     nsub = int(prm[k.P_NSUB])
     h = prm[k.P_H]
     T = prm[k.P_T]
+    keep = trace.shape[0] > 0
     for j in range(n):
         i = i0 + j
+        if keep:
+            trace[o0 + j, :] = st
         if feed:  # the held cylinder's pressures, as recorded (the seal torque reads them)
             if math.isfinite(p_c[i, 0]) and math.isfinite(p_c[i, 1]):
                 st[k.S_PC1] = p_c[i, 0]
@@ -94,19 +100,19 @@ def _run(st, prm, u_l, u_r, i0, n, out, o0, which, p_c, feed):
 @njit(cache=True)
 def _replay(st, prm, u_l, u_r, out, which, p_c):
     feed = which == 2 and p_c.shape[0] == u_l.shape[0]
-    _run(st, prm, u_l, u_r, 0, u_l.shape[0], out, 0, which, p_c, feed)
+    _run(st, prm, u_l, u_r, 0, u_l.shape[0], out, 0, which, p_c, feed, np.zeros((0, k.N_STATE)))
 
 
 @njit(cache=True, parallel=True)
-def _replay_segments(states, prm, u_l, u_r, starts, lengths, rows, out, which, p_c):
+def _replay_segments(states, prm, u_l, u_r, starts, lengths, rows, out, which, p_c, trace):
     feed = which == 2 and p_c.shape[0] == u_l.shape[0]
     for s in prange(starts.shape[0]):  # the segments are independent: one per thread
         st = states[s].copy()
-        _run(st, prm, u_l, u_r, starts[s], lengths[s], out, rows[s], which, p_c, feed)
+        _run(st, prm, u_l, u_r, starts[s], lengths[s], out, rows[s], which, p_c, feed, trace)
 
 
 @njit(cache=True)
-def _spools(prm, base, u, out):
+def _spools(prm, base, u, out, env):
     st = np.zeros(k.N_STATE)
     u0 = k.ao_value(prm, u[0])
     st[k.S_SL] = u0
@@ -117,8 +123,12 @@ def _spools(prm, base, u, out):
         out[i, 1] = st[k.S_SDL]
         out[i, 2] = st[k.S_YL]
         ui = k.ao_value(prm, u[i])
+        lo, hi = math.inf, -math.inf
         for _ in range(nsub):
-            k.spool_step(st, prm, base, k.S_SL, k.S_SDL, k.S_YL, ui)
+            y = k.spool_step(st, prm, base, k.S_SL, k.S_SDL, k.S_YL, ui)
+            lo, hi = min(lo, y), max(hi, y)
+        env[i, 0] = lo
+        env[i, 1] = hi
 
 
 def spool_trajectory(prm: np.ndarray, axis: str, u: np.ndarray) -> np.ndarray:
@@ -128,11 +138,43 @@ def spool_trajectory(prm: np.ndarray, axis: str, u: np.ndarray) -> np.ndarray:
     The spool depends on nothing the identification fits, so one pass over a
     record gives every segment its exact start (the play's state included).
     """
+    return _spool_pass(prm, axis, u)[0]
+
+
+def opening_envelope(prm: np.ndarray, axis: str, u: np.ndarray) -> np.ndarray:
+    """(n, 2): the least and greatest opening (V, after the play) the valve's flow curve is
+    read at over the substeps of each period, under the held voltages ``u`` from rest at
+    u[0] -- the same spool as :func:`spool_trajectory`, so every segment's replay reads
+    its curve inside these bounds."""
+    return _spool_pass(prm, axis, u)[1]
+
+
+def _spool_pass(prm: np.ndarray, axis: str, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     base = k.P_VALVE_L if axis == "linear" else k.P_VALVE_R
     uu = np.ascontiguousarray(u, dtype=np.float64)
-    out = np.empty((uu.shape[0], 3))
-    _spools(prm, base, uu, out)
-    return out
+    out, env = np.empty((uu.shape[0], 3)), np.empty((uu.shape[0], 2))
+    _spools(prm, base, uu, out, env)
+    return out, env
+
+
+def changed_openings(prm0: np.ndarray, prm1: np.ndarray) -> tuple[str, float, float] | None:
+    """Where two parameter vectors differ, if only in one valve's flow tables: (axis, lo, hi),
+    the openings (V) whose flow reads a changed cell (:func:`pneu_sim.physics.kernel.port_flow`
+    reads cells int(y/TAB_DU) and the next; a margin of a cell more each side; ±inf at
+    the table's ends); ("linear", inf, -inf) when they do not differ; None when they
+    differ anywhere else (every sample may change)."""
+    diff = np.flatnonzero(prm0 != prm1)
+    if not len(diff):
+        return "linear", math.inf, -math.inf
+    for axis, base in (("linear", k.P_VALVE_L), ("rotary", k.P_VALVE_R)):
+        a, b = base + k.VB_TAB4, base + k.VB_SIZE
+        if diff[0] >= a and diff[-1] < b:
+            cells = (diff - a) % k.TAB_N
+            c_lo, c_hi = int(cells.min()), int(cells.max())
+            lo = (c_lo - 2) * k.TAB_DU if c_lo > 2 else -math.inf
+            hi = (c_hi + 2) * k.TAB_DU if c_hi < k.TAB_N - 3 else math.inf
+            return axis, lo, hi
+    return None
 
 
 def spool_key(prm: np.ndarray, axis: str) -> bytes:
@@ -327,6 +369,7 @@ def replay_segments(
     lengths: np.ndarray,
     axes: str = "both",
     p_c: np.ndarray | None = None,
+    trace: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`replay` of many segments at once, in parallel (numba threads; each segment's
     arithmetic is :func:`replay`'s, so the rows are the same bits).
@@ -334,7 +377,9 @@ def replay_segments(
     Segment s starts from ``states[s]`` (not modified) at period ``starts[s]`` of the
     full-record voltages ``u_linear``/``u_rotary`` and runs ``lengths[s]`` periods;
     ``p_c``: the full record's chamber pressures (as in :func:`replay`, ``axes="rotary"``
-    only). Returns the segments' rows one after the other: (Σ lengths, 6).
+    only). Returns the segments' rows one after the other: (Σ lengths, 6). ``trace``: a
+    (Σ lengths, N_STATE) array that gets, row for row, the state each period starts from
+    (a segment restarted from its row j replays rows j... to the same bits).
     """
     u_l, u_r, pc = _inputs(u_linear, u_rotary, axes, p_c)
     st = np.ascontiguousarray(states, dtype=np.float64).reshape(-1, k.N_STATE)
@@ -346,7 +391,10 @@ def replay_segments(
         raise ValueError("states, starts, lengths: one per segment, inside the voltages")
     rows = np.concatenate(([0], np.cumsum(n)[:-1])).astype(np.int64) if len(n) else n
     out = np.empty((int(n.sum()), N_REPLAY))
-    _replay_segments(st, prm, u_l, u_r, i0, n, rows, out, AXES_CODE[axes], pc)
+    tr = np.zeros((0, k.N_STATE)) if trace is None else trace
+    if tr.shape[0] and tr.shape != (out.shape[0], k.N_STATE):
+        raise ValueError(f"trace: shape {tr.shape} refused; allowed: ({out.shape[0]}, {k.N_STATE})")
+    _replay_segments(st, prm, u_l, u_r, i0, n, rows, out, AXES_CODE[axes], pc, tr)
     return out
 
 
