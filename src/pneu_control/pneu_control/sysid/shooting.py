@@ -13,6 +13,11 @@ voltages) and runs open loop on the recorded voltages
 fall on its segment boundaries (the rig is at its calmest there: a pulse
 starts from rest and is replayed whole). ``segment_s`` = ∞ is a pure
 simulation from the first sample (MATLAB ``compare``'s default).
+
+A replay can be kept whole (:func:`trace`: the state each period starts from),
+and a replay with other values started again from it where they cannot have
+acted yet (:func:`simulate_from`, the same bits): what the fit's Jacobian uses
+for a valve's curve knots, which act only once the spool opens that far.
 """
 
 from __future__ import annotations
