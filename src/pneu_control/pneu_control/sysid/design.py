@@ -38,6 +38,8 @@ units, as the controllers' parameters).
 
 from __future__ import annotations
 
+import bisect
+import functools
 import json
 import math
 from dataclasses import asdict, dataclass, field
@@ -122,12 +124,14 @@ class ExcitationDesign:
         """The design's length in s (the end of its last segment)."""
         return self.segments[-1].t1_s if self.segments else 0.0
 
+    @functools.cached_property
+    def _ends(self) -> tuple[float, ...]:
+        return tuple(s.t1_s for s in self.segments)
+
     def segment_at(self, t: float) -> int:
-        """Index of the segment active at ``t`` (s from the start; the last one after the end)."""
-        for i, s in enumerate(self.segments):
-            if t < s.t1_s:
-                return i
-        return len(self.segments) - 1
+        """Index of the segment active at ``t`` (s from the start; the last one after the end):
+        the first whose end is after ``t``."""
+        return min(bisect.bisect_right(self._ends, t), len(self.segments) - 1)
 
     def make_controller(self, axis: str, sample_time_s: float = 1e-3) -> Any:
         """The per-sample core that runs this design (the runner's hook, ``RunSpec.controllers``)."""
