@@ -188,11 +188,12 @@ def initial_states(
     return out
 
 
-def _spools(rec: Record, prm: np.ndarray, axis: str) -> np.ndarray:
-    """:func:`pneu_sim.physics.replay.spool_trajectory` over the record, once per spool model."""
+def _spool_pass(rec: Record, prm: np.ndarray, axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pneu_sim.physics.replay.spool_pass` over the record (the spool's states at each
+    sample, its opening's bounds in each period), once per spool model."""
     key = ("spools", axis, rp.spool_key(prm, axis))
     if key not in rec.memo:
-        rec.memo[key] = rp.spool_trajectory(prm, axis, rec.u[axis])
+        rec.memo[key] = rp.spool_pass(prm, axis, rec.u[axis])
     return rec.memo[key]
 
 
@@ -215,7 +216,7 @@ def _setup(params, rec: Record, seg: Segments, offsets: dict[str, float], axes: 
     """(prm, segment start states, the recorded cylinder pressures for a rotary replay)."""
     prm = rp.replay_params(params)
     kbar = rp.mean_vane_factor(prm)
-    spools = {a: _spools(rec, prm, a) for a in ("linear", "rotary")}
+    spools = {a: _spool_pass(rec, prm, a)[0] for a in ("linear", "rotary")}
     states = initial_states(rec, seg, offsets, spools)
     p_c = None
     if axes == "rotary":  # the seal torque reads the cylinder's pressures: feed the recorded ones
@@ -258,13 +259,6 @@ def trace(
     return _outputs(sim, offsets), Trace(rec, seg, axes, prm, st, sim, kept, rows)
 
 
-def _envelope(rec: Record, prm: np.ndarray, axis: str) -> np.ndarray:
-    key = ("envelope", axis, rp.spool_key(prm, axis))
-    if key not in rec.memo:
-        rec.memo[key] = rp.opening_envelope(prm, axis, rec.u[axis])
-    return rec.memo[key]
-
-
 def simulate_from(params, base: Trace, offsets: dict[str, float]) -> dict[str, np.ndarray]:
     """:func:`simulate` with other values, to the same bits, replaying each segment only from
     the first period the change can act in: a change confined to a valve's flow curve acts
@@ -278,7 +272,7 @@ def simulate_from(params, base: Trace, offsets: dict[str, float]) -> dict[str, n
     first = np.zeros(len(seg), dtype=np.int64)
     if where is not None:
         axis, lo, hi = where
-        env = _envelope(rec, prm, axis)
+        env = _spool_pass(rec, prm, axis)[1]
         hit = (env[:, 1] >= lo) & (env[:, 0] <= hi)
         for s, (i0, ns) in enumerate(zip(seg.starts.tolist(), n.tolist())):
             h = np.flatnonzero(hit[i0 : i0 + ns])

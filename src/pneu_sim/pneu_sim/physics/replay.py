@@ -50,6 +50,7 @@ __all__ = [
     "replay_state",
     "rod_torque",
     "spool_key",
+    "spool_pass",
     "spool_trajectory",
 ]
 
@@ -138,7 +139,7 @@ def spool_trajectory(prm: np.ndarray, axis: str, u: np.ndarray) -> np.ndarray:
     The spool depends on nothing the identification fits, so one pass over a
     record gives every segment its exact start (the play's state included).
     """
-    return _spool_pass(prm, axis, u)[0]
+    return spool_pass(prm, axis, u)[0]
 
 
 def opening_envelope(prm: np.ndarray, axis: str, u: np.ndarray) -> np.ndarray:
@@ -146,10 +147,11 @@ def opening_envelope(prm: np.ndarray, axis: str, u: np.ndarray) -> np.ndarray:
     read at over the substeps of each period, under the held voltages ``u`` from rest at
     u[0] -- the same spool as :func:`spool_trajectory`, so every segment's replay reads
     its curve inside these bounds."""
-    return _spool_pass(prm, axis, u)[1]
+    return spool_pass(prm, axis, u)[1]
 
 
-def _spool_pass(prm: np.ndarray, axis: str, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def spool_pass(prm: np.ndarray, axis: str, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(:func:`spool_trajectory`, :func:`opening_envelope`) from one pass of the spool."""
     base = k.P_VALVE_L if axis == "linear" else k.P_VALVE_R
     uu = np.ascontiguousarray(u, dtype=np.float64)
     out, env = np.empty((uu.shape[0], 3)), np.empty((uu.shape[0], 2))
