@@ -82,3 +82,32 @@ def test_the_shared_jacobian_is_least_squares_own_to_the_bit(bag, axis, monkeypa
     whole = sum(s.lengths.sum() for _r, s in prob.used)
     assert periods[0] == whole and len(periods) <= 1 + prob.n_p + prob.n_off
     assert sum(periods) < 0.9 * (1 + prob.n_p + prob.n_off) * whole
+
+
+def test_a_refit_starts_from_the_fitted_plant(bag):
+    """The bootstrap's refit (fit.refit) starts where the fit ended: its handles mean what they
+    meant in the fit (about the curve that fit started from, here with a dead band off the
+    start curve's 50 mV grid), so on the fit's own bag it starts at the fit's plant and cost."""
+    from dataclasses import replace
+
+    from pneu_control.sysid import curve, model
+    from pneu_control.sysid.fit import FitOptions, Problem, refit
+    from pneu_sim.physics.valve_curve import port_curves
+
+    rec = load_record(bag)
+    base = PlantParams()
+    v = base.valve_linear
+    shifted = with_updates(
+        base, {"valve_linear.du_table": model.shifted_table(v.du_table, -0.0589)}
+    )
+    start = curve.own_curve_plant(shifted, "linear")
+    knots, sup = curve.fit_params("linear", start, [rec])
+    opt = FitOptions(params=("linear.c_v", *(p.name for p in knots)), max_nfev=1)
+    prob = Problem("linear", start, [rec], opt, extra=knots)
+    moved = {p.name: model.base_value(start, p) for p in knots}
+    moved = {n: x + (0.013 if n.endswith("@null") else 0.1 * x) for n, x in moved.items()}
+    fit = replace(prob.solve(moved, lambda _m: None), curve_support=sup)  # max_nfev=1: the start
+    again = refit("linear", base, [rec], fit, opt)
+    for a, b in zip(port_curves(again.plant.valve_linear), port_curves(fit.plant.valve_linear)):
+        assert np.allclose(a, b, rtol=0.0, atol=1e-9)
+    assert again.cost == pytest.approx(fit.cost, rel=1e-9)

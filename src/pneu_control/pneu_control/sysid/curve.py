@@ -37,7 +37,7 @@ import numpy as np
 from pneu_msgs_py.params.core import with_updates
 from pneu_sim.physics.valve_curve import FLOW_BOUND, grid, port_curves
 
-from pneu_control.sysid.model import FitParam
+from pneu_control.sysid.model import FitParam, is_handle
 
 __all__ = [
     "KNOTS_DV",
@@ -60,11 +60,6 @@ _WIDTH_V = 0.05  # fit coordinate of the edges: z = 1 is 50 mV
 _WIDTH_G = 0.02  # ... of the increments: z = 1 is 2 % of full flow
 _SIGN = {"4": 1.0, "2": -1.0}
 _DENSE = np.round(np.arange(0.0, 10.0 + 1e-9, 0.05), 2)  # V: the start curve's grid
-
-
-def is_handle(name: str) -> bool:
-    """Is ``name`` a curve handle (``<valve>.flow_<port>@<what>``)?"""
-    return "@" in name
 
 
 def _parse(name: str) -> tuple[str, str, str]:

@@ -97,6 +97,7 @@ class AxisFit:
     q95: float = 1.96  # the 95 % quantile the intervals use (Student's t with the draws' dof)
     fit_params: tuple = ()  # the FitParams of ``names`` (model.FitParam)
     curve_support: object = None  # what the data inform of the valve's own curve (curve stage)
+    about: object = None  # the PlantParams the coordinates are about (a curve's handles: its shape)
 
     def offset_start(self) -> dict[str, float]:
         """The sensor offsets as start values (``offset:<record>:<signal>`` -> Pa)."""
@@ -243,7 +244,7 @@ def _fit_own_curve(axis, base, records, options, fit: AxisFit, log):
     )
     # the report's base column: the values identify started from, not this stage's start
     own.base = [
-        own.base[i] if curve.is_handle(n) else model.base_value(base, own.fit_params[i])
+        own.base[i] if model.is_handle(n) else model.base_value(base, own.fit_params[i])
         for i, n in enumerate(own.names)
     ]
     own.cost_start = fit.cost_start
@@ -327,11 +328,11 @@ def refit(axis: str, base, records: list[Record], fit: AxisFit, options: FitOpti
     """The least squares of ``fit``'s parameters on other ``records``, from ``fit``'s values
     (the offsets from 0): the stage-2 fit alone, as :func:`fit_axis` ends."""
     options = replace(options or FitOptions(), params=tuple(fit.names))
-    knots = tuple(p for p in fit.fit_params if "@" in p.name)
-    if knots:  # the knots ride on the fitted curve's own shape
+    knots = tuple(p for p in fit.fit_params if model.is_handle(p.name))
+    if knots:  # the handles mean what they meant in the fit: about the curve it started from
         from pneu_control.sysid.curve import with_curve_of
 
-        base = with_curve_of(base, fit.plant, fit.curve_support.valve)
+        base = with_curve_of(base, fit.about, fit.curve_support.valve)
     problem = Problem(axis, base, records, options, extra=knots)
     return problem.solve(dict(zip(fit.names, fit.value)), lambda _m: None)
 
@@ -532,7 +533,7 @@ class Problem:
         # a curve knot's column replays from where the valve first opens that far: the
         # shared Jacobian; without knots every column replays whole and the trace would
         # only cost (scipy's own differences, the same bits either way)
-        shared = any("@" in p.name for p in params)
+        shared = any(model.is_handle(p.name) for p in params)
         every = 1 if shared else len(z0) + 1  # a line per step
 
         def tracked(z):
@@ -624,6 +625,7 @@ class Problem:
             n_clusters=self.n_clusters,
             plant=model.apply(self.base, self.params, vals),
             fit_params=self.params,
+            about=self.base,
         )
 
 

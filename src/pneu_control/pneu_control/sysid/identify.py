@@ -127,14 +127,14 @@ class Identification:
         lines = ["| parameter | base | identified | 95 % CI | taken |", "|---|---|---|---|---|"]
         for fit in self.fits.values():  # a valve's own curve: one row (its knots in the JSON)
             if fit.curve_support is not None:
-                n = sum(1 for name in fit.names if "@" in name)
-                band = max(fit.ci95(i) for i, name in enumerate(fit.names) if "@" in name)
+                n = sum(1 for name in fit.names if model.is_handle(name))
+                band = max(fit.ci95(i) for i, name in enumerate(fit.names) if model.is_handle(name))
                 lines.append(
                     f"| {fit.curve_support.valve} curve | catalogue | own, {n} values "
                     f"({fit.curve_support.text()}) | ±{band:.3g} at most | yes |"
                 )
         for r in self.rows():
-            if "@" in r["name"]:
+            if model.is_handle(r["name"]):
                 continue
             ci = (
                 f"±{r['ci95']:.3g} {r['unit']}"
@@ -152,7 +152,7 @@ class Identification:
             )
         for axis, f in self.fits.items():
             for a, b, rho in f.correlated_pairs():
-                if "@" in a and "@" in b:
+                if model.is_handle(a) and model.is_handle(b):
                     continue  # neighbouring knots of one curve trade by construction
                 lines.append(
                     f"\n{axis}: {a} and {b} correlated (ρ = {rho:+.3f}): not separately identifiable from these bags"
@@ -298,7 +298,7 @@ def _taken(plant, fit: AxisFit, kept: list[str], every: bool = False):
     params = list(fit.fit_params)
     take = []
     for i, p in enumerate(params):
-        if "@" in p.name:  # a curve knot: the curve is taken whole, below
+        if model.is_handle(p.name):  # a curve knot: the curve is taken whole, below
             continue
         # judged on the estimated scatter (1.96 σ), not on the interval's t quantile, which
         # also carries how few bootstrap draws that estimate rests on
@@ -358,7 +358,7 @@ def _replicated(base, fits: dict[str, AxisFit], recs, noise, options, log) -> di
 
 def _absolute(name: str) -> bool:
     """Is the interval of ``name`` reported in its unit (a dead band, a curve knot)?"""
-    return name.endswith("." + model.DEAD_BAND) or "@" in name
+    return name.endswith("." + model.DEAD_BAND) or model.is_handle(name)
 
 
 def _core_leaves(tree: Any) -> Any:
@@ -411,7 +411,7 @@ def _identified_tree(ident: Identification, base_tree: dict, names: str) -> dict
     for fit in ident.fits.values():
         _set_own_curve(tree, fit, values, names)
         for i, name in enumerate(fit.names):
-            if "@" in name:
+            if model.is_handle(name):
                 continue
             if name.endswith("." + model.DEAD_BAND):
                 leaf = name.split(".")[0] + ".du_table"
@@ -461,7 +461,7 @@ def _set_own_curve(tree: dict, fit: AxisFit, values: dict, names: str) -> None:
     if sup is None:
         return
     valve = sup.valve
-    band = max((fit.ci95(i) for i, n in enumerate(fit.names) if "@" in n), default=0.0)
+    band = max((fit.ci95(i) for i, n in enumerate(fit.names) if model.is_handle(n)), default=0.0)
     src = (
         f"identified from {names}: the valve's own curve, monotone per port, {sup.text()}; "
         f"knots ±{band:.3f} of full flow at most (95 %)"

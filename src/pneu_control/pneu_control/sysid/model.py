@@ -32,6 +32,7 @@ __all__ = [
     "FIT_PARAMS",
     "apply",
     "base_value",
+    "is_handle",
     "shifted_table",
 ]
 
@@ -109,12 +110,18 @@ def shifted_table(du_table: tuple[float, ...], shift_v: float) -> tuple[float, .
     return out
 
 
+def is_handle(name: str) -> bool:
+    """Is ``name`` a handle of a valve's own curve (``<valve>.flow_<port>@<what>``,
+    :mod:`pneu_control.sysid.curve`)?"""
+    return "@" in name
+
+
 def base_value(base, p: FitParam) -> float:
     """The value of ``p`` in the base plant (0 for a dead-band shift; a curve knot's on the
     base's curve, :mod:`pneu_control.sysid.curve`)."""
     if p.name.endswith("." + DEAD_BAND):
         return 0.0
-    if "@" in p.name:
+    if is_handle(p.name):
         from pneu_control.sysid import curve
 
         return curve.base_value(base, p.name)
@@ -124,13 +131,13 @@ def base_value(base, p: FitParam) -> float:
 def apply(base, params: tuple[FitParam, ...], values: list[float]):
     """``base`` PlantParams with ``params`` set to ``values`` (validated)."""
     updates: dict[str, object] = {}
-    knots = {p.name: v for p, v in zip(params, values) if "@" in p.name}
+    knots = {p.name: v for p, v in zip(params, values) if is_handle(p.name)}
     if knots:  # a valve's own curve (pneu_control.sysid.curve)
         from pneu_control.sysid import curve
 
         updates.update(curve.updates(base, knots))
     for p, v in zip(params, values):
-        if "@" in p.name:
+        if is_handle(p.name):
             continue
         if p.name.endswith("." + DEAD_BAND):
             valve = p.name.split(".")[0]
