@@ -64,6 +64,8 @@ class FitOptions:
     params: tuple[str, ...] | None = None  # names to fit (default: every parameter of the axis)
     short_segment_s: float = 0.2  # the flow-curve stage's smooth cost (see _scan_dead_band)
     short_every: int = 3  # ... on every 3rd short segment
+    settle_segment_s: float = 0.5  # a solve's first pass: shorter segments (see _continued)
+    settle_every: int = 2  # ... every 2nd of them
     curve: bool = True  # last stage: the valve's own curve (pneu_control.sysid.curve)
 
 
@@ -173,7 +175,7 @@ def fit_axis(
     start = groups.refit_unexplained(axis, base, records, options, fit, check, log)
     if start is not None:
         log(f"  {axis}: global stage: every parameter again, from there")
-        again = full.solve(start, log)
+        again = _continued(full, start, log)
         log(f"  {axis}: cost {again.cost:.5g} there, {fit.cost:.5g} before")
         if again.cost < fit.cost:
             fit = replace(again, cost_start=fit.cost_start)
@@ -221,8 +223,7 @@ def _fit_own_curve(axis, base, records, options, fit: AxisFit, log):
         replace(options, params=(*others, *(p.name for p in knots))),
         extra=knots,
     )
-    offs = fit.offset_start()
-    own = prob.solve(offs, log)
+    own = _continued(prob, fit.offset_start(), log)
     # Kept only when the lower cost pays for the values added: Schwarz's criterion (BIC;
     # Schwarz, Ann. Statist. 6, 1978) on the effective sample, the residuals over their
     # autocorrelation time (the larger of the two fits'). A cost merely lower is what 30
@@ -294,15 +295,18 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
         base1 = model.apply(base, p_mech, [mech[p.name] for p in p_mech])
     log(f"  {axis}: stage 1, the valve's flow curve ({', '.join(first)})")
     start, _ = _flow_curve_start(axis, base1, records, options, first, {}, log)
+    settle = replace(options, segment_s={**options.segment_s, axis: options.settle_segment_s})
     if mech:  # the rest settles around the pinned mechanics first, then everything moves
         for group in _settling_groups(axis, names, mech):
             log(f"  {axis}: stage 2a, {', '.join(group)} (the mechanics pinned)")
-            held = Problem(axis, base1, records, replace(options, params=group)).solve(start, log)
+            held = Problem(
+                axis, base1, records, replace(settle, params=group), every=options.settle_every
+            ).solve(start, log)
             start = {**start, **held.start()}
     start.update(mech)
     stage()
-    log(f"  {axis}: stage 2, every parameter")
-    fit = full.solve(start, log)
+    log(f"  {axis}: stage 2, every parameter (on {options.settle_segment_s:g} s segments first)")
+    fit = _continued(full, start, log)
     # The scan saw the other parameters at their start values; when stage 2 moved the dead
     # band away from its pick, those biased it (a wrong inertia, say): scan again with the
     # fitted values, and run stage 2 once more if that finds a lower cost elsewhere.
@@ -320,8 +324,35 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
     if cost2 >= fit.cost or abs(start2[db] - d_fit) <= 0.005:
         return fit
     log(f"  {axis}: stage 2 again, from dead band {start2[db]:+.3f} V")
-    fit2 = full.solve({**fitted, **offs, **start2}, log)
+    fit2 = _continued(full, {**fitted, **offs, **start2}, log)
     return fit2 if fit2.cost < fit.cost else fit
+
+
+def _continued(prob: Problem, start: dict[str, float], log: Callable[[str], None]) -> AxisFit:
+    """``prob`` solved as a continuation in the shooting segments' length: first on every
+    ``settle_every``-th segment of ``settle_segment_s`` (a basin to start from, at half the
+    replay), then on its own segments, from there.
+
+    Over a replay of seconds a few % of inertia or friction (the equation-error start's
+    error) moves the speed so far that the flow scale, supply and leakage absorb it in a
+    valley of their own (issue 21's f^0.7 plant's motor: p_s +17 %, cost 8.05 against 3.14
+    at the truth's optimum), and a curve stage started against its bounds stops in one
+    (plant B: 438 against 8.3). Short segments restart from the measured state before such
+    an error grows, so their cost is nearly convex about the truth (Bock & Plitt, IFAC
+    1984: why multiple shooting); the long segments then weigh what only they see.
+    """
+    o = prob.options
+    settle = replace(o, segment_s={**o.segment_s, prob.axis: o.settle_segment_s})
+    short = Problem(
+        prob.axis, prob.base, prob.records, settle, every=o.settle_every, extra=prob.extra
+    ).solve(start, log)
+    fit = prob.solve(short.start(), log)
+    return replace(
+        fit,
+        cost_start=short.cost_start,
+        nfev=fit.nfev + short.nfev,
+        wall_s=fit.wall_s + short.wall_s,
+    )
 
 
 def refit(axis: str, base, records: list[Record], fit: AxisFit, options: FitOptions | None = None):
@@ -394,6 +425,7 @@ class Problem:
         design segment (:class:`pneu_control.sysid.design.Segment`) it accepts; ``extra``:
         parameters beyond the axis's own (a valve's curve knots)."""
         self.axis, self.base, self.options = axis, base, options
+        self.records, self.extra = records, tuple(extra)
         known = model.AXIS_PARAMS[axis] + tuple(extra)
         self.params = tuple(p for p in known if p.name in options.params)
         self.p0 = [model.base_value(base, p) for p in self.params]
