@@ -91,3 +91,25 @@ def test_never_overwrites(tmp_path):
     out = write_plant(_ident(base), tree, tmp_path / "p.yaml", overwrite=True)
     assert out.read_text().startswith("# Plant") and (tmp_path / "p.identify.json").is_file()
     assert not list(tmp_path.glob("*.partial")) and not list(tmp_path.glob(".*lock"))
+
+
+def test_a_wide_interval_keeps_the_base_only_where_it_contains_the_base():
+    """1.96 σ above half the value (or width) keeps the base value -- the data do not
+    determine it -- unless the 95 % interval excludes the base: then the data contradict it."""
+    from dataclasses import replace
+
+    from pneu_control.sysid.identify import _taken
+
+    base = load_plant()
+    fit = _ident(base).fits["rotary"]
+    fit = replace(fit, fit_params=tuple(p for n in fit.names for p in model.AXIS_PARAMS["rotary"] if p.name == n))  # fmt: skip
+    # V_m2 3e-6 ± 1.96·5e-5 (q95 1.96) around a base of 1e-5: wide, and the base inside it
+    kept: list[str] = []
+    plant = _taken(base, fit, kept)
+    assert kept == ["rotary.V_m2"] and plant.rotary.V_m2 == base.rotary.V_m2
+    assert plant.rotary.J_m == 5.6e-5
+    # the same scatter, 5 σ from the base: taken
+    far = replace(fit, value=[5.6e-5, 1e-5 + 5 * 5e-5, 0.12])
+    kept = []
+    plant = _taken(base, far, kept)
+    assert kept == [] and plant.rotary.V_m2 == pytest.approx(1e-5 + 5 * 5e-5)
