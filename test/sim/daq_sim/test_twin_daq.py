@@ -164,6 +164,47 @@ def test_the_card_file_holds_the_outputs_across_processes(tmp_path):
     assert (daq.card.state().ao0_v, daq.card.state().ao1_v) == (0.0, 0.0)
 
 
+_POWER_UPS = """
+import os, sys
+from pneu_sim.daq_sim.card import CardRegister
+path, n = sys.argv[1], int(sys.argv[2])
+for _ in range(n):
+    if os.path.exists(path):
+        os.unlink(path)
+    CardRegister(path).close()
+print("done", flush=True)
+"""
+
+
+def test_a_card_being_powered_up_is_never_read_half_made(tmp_path):
+    """Another process polls the card file while the driver powers it up (the killed-driver
+    test below, on a loaded machine): it reads no card or a whole one, never a file that its
+    foreign-file check refuses. A process powers up a new card 2000 times while this one reads."""
+    card = tmp_path / "card"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _POWER_UPS, str(card), "2000"], stdout=subprocess.PIPE, text=True
+    )
+    reads = 0
+    while proc.poll() is None:
+        try:
+            st = read_card_state(card)
+        except FileNotFoundError:
+            continue
+        assert (st.ao0_v, st.ao1_v, st.pid) == (0.0, 0.0, proc.pid)
+        reads += 1
+    assert proc.wait() == 0 and proc.stdout.read().strip() == "done"
+    assert reads > 0 and not list(tmp_path.glob(".card.*"))  # no temporary file left behind
+
+
+def test_reading_a_card_file_never_creates_one(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        read_card_state(tmp_path / "card")
+    assert not (tmp_path / "card").exists()
+    (tmp_path / "card").write_bytes(b"")  # an empty file: a card that never powered up
+    assert read_card_state(tmp_path / "card").ao0_v == 0.0
+    assert (tmp_path / "card").stat().st_size == 0
+
+
 def test_backend_by_name_and_its_options():
     rig = rig_for()
     daq = make_backend("sim:seed=3,stall_at_s=1,stall_ms=2", rig)

@@ -72,9 +72,11 @@ class CardRegister:
             self._power_up()
             return
         self._refuse_foreign(self.path)
-        fresh = not self.path.exists() or self.path.stat().st_size != SIZE
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        if not self.path.exists():
+            _create(self.path)
+        fd = os.open(self.path, os.O_RDWR)
         try:
+            fresh = os.fstat(fd).st_size != SIZE  # an empty file: a card never powered up
             if fresh:
                 os.ftruncate(fd, SIZE)
             self._mm = mmap.mmap(fd, SIZE)
@@ -124,9 +126,7 @@ class CardRegister:
             raise ParamError("backend sim card", str(path), "a file that is not an input")
 
     def _power_up(self) -> None:
-        _LAYOUT.pack_into(
-            self._mm, 0, _MAGIC, _VERSION, 0, POWER_UP_AO_V, POWER_UP_AO_V, 0, 0, 0, os.getpid()
-        )
+        self._mm[:SIZE] = _power_up_image()
 
     # ------------------------------------------------------------------ writes
     def set_ao(self, ao0_v: float, ao1_v: float) -> None:
@@ -167,10 +167,39 @@ class CardRegister:
         self._mm.close()
 
 
-def read_card_state(path: str | Path) -> CardState:
-    """The state a card file holds (e.g. after the process driving it was killed)."""
-    reg = CardRegister(path)
+def _power_up_image() -> bytes:
+    return _LAYOUT.pack(_MAGIC, _VERSION, 0, POWER_UP_AO_V, POWER_UP_AO_V, 0, 0, 0, os.getpid())
+
+
+def _create(path: Path) -> None:
+    """A new card file at ``path``, whole at once: the power-up image is written to a
+    temporary file beside it and linked in, so a reader (another process polling the card)
+    never sees it half made, and a file another process made meanwhile is never replaced."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.new")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
     try:
-        return reg.state()
+        os.write(fd, _power_up_image())
     finally:
-        reg.close()
+        os.close(fd)
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        pass  # another process powered the card up first: that is the card
+    finally:
+        os.unlink(tmp)
+
+
+def read_card_state(path: str | Path) -> CardState:
+    """The state a card file holds (e.g. after the process driving it was killed); reading
+    never creates a card file or powers one up (a missing file: FileNotFoundError)."""
+    path = Path(path)
+    CardRegister._refuse_foreign(path)
+    with open(path, "rb") as fh:
+        head = fh.read(SIZE)
+    if len(head) < SIZE:  # an empty file: a card that never powered up, no writer yet
+        return CardState(POWER_UP_AO_V, POWER_UP_AO_V, False, 0, 0, 0, 0)
+    _m, version, *rest = _LAYOUT.unpack(head)
+    if version != _VERSION:
+        raise ValueError(f"card file {path}: version {version} refused; allowed: {_VERSION}")
+    do, ao0, ao1, edges, updates, tick, pid = rest
+    return CardState(ao0, ao1, bool(do), edges, updates, tick, pid)
