@@ -295,7 +295,7 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
         base1 = model.apply(base, p_mech, [mech[p.name] for p in p_mech])
     log(f"  {axis}: stage 1, the valve's flow curve ({', '.join(first)})")
     start, _ = _flow_curve_start(axis, base1, records, options, first, {}, log)
-    settle = replace(options, segment_s={**options.segment_s, axis: options.settle_segment_s})
+    settle = _settle_options(options, axis)
     if mech:  # the rest settles around the pinned mechanics first, then everything moves
         for group in _settling_groups(axis, names, mech):
             log(f"  {axis}: stage 2a, {', '.join(group)} (the mechanics pinned)")
@@ -341,10 +341,9 @@ def _continued(prob: Problem, start: dict[str, float], log: Callable[[str], None
     an error grows, so their cost is nearly convex about the truth (Bock & Plitt, IFAC
     1984: why multiple shooting); the long segments then weigh what only they see.
     """
-    o = prob.options
-    settle = replace(o, segment_s={**o.segment_s, prob.axis: o.settle_segment_s})
+    settle = _settle_options(prob.options, prob.axis)
     short = Problem(
-        prob.axis, prob.base, prob.records, settle, every=o.settle_every, extra=prob.extra
+        prob.axis, prob.base, prob.records, settle, every=settle.settle_every, extra=prob.extra
     ).solve(start, log)
     fit = prob.solve(short.start(), log)
     return replace(
@@ -353,6 +352,11 @@ def _continued(prob: Problem, start: dict[str, float], log: Callable[[str], None
         nfev=fit.nfev + short.nfev,
         wall_s=fit.wall_s + short.wall_s,
     )
+
+
+def _settle_options(options: FitOptions, axis: str) -> FitOptions:
+    """``options`` with the axis's segments ``settle_segment_s`` long (a solve's first pass)."""
+    return replace(options, segment_s={**options.segment_s, axis: options.settle_segment_s})
 
 
 def refit(axis: str, base, records: list[Record], fit: AxisFit, options: FitOptions | None = None):
