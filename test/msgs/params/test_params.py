@@ -17,6 +17,7 @@ class Outer:
     algorithm: str = param("pid", choices=("pid", "ladrc", "eso_smc"))
     omega_0: float = param(25.0, unit="rad/s", lo=0.0, hi=500.0)
     inner: Inner = param(Inner)
+    table: tuple[float, ...] = param((0.0, 1.0), unit="-")
 
     def _check(self):
         if self.algorithm == "ladrc" and self.omega_0 < 1.0:
@@ -30,6 +31,7 @@ def test_defaults_and_flatten():
         "omega_0": 25.0,
         "inner.epsilon": 1200.0,
         "inner.n": 3,
+        "table": [0.0, 1.0],  # a list, as YAML writes it
     }
 
 
@@ -67,6 +69,30 @@ def test_with_updates_is_atomic():
     o2 = with_updates(o, {"inner.epsilon": 900, "algorithm": "ladrc"})
     assert o2.inner.epsilon == 900.0 and isinstance(o2.inner.epsilon, float)
     assert o.inner.epsilon == 1200.0
+
+
+@pytest.mark.parametrize(
+    ("value", "refusal"),
+    [
+        ((0.0, float("nan"), 1.0), r"^table\[1\]: nan refused; allowed: a finite number$"),
+        ((0.0, 1.0, float("inf")), r"^table\[2\]: inf refused; allowed: a finite number$"),
+        ((True, 1.0), r"^table\[0\]: True refused; allowed: a finite number$"),
+        ((0.0, "1"), r"^table\[1\]: '1' refused; allowed: a finite number$"),
+        (3.0, r"^table: 3.0 refused; allowed: a list of numbers$"),
+    ],
+)
+def test_a_list_of_numbers_names_the_bad_element(value, refusal):
+    o = from_dict(Outer, {}, strict=False)
+    with pytest.raises(ParamError, match=refusal):
+        with_updates(o, {"table": value})
+
+
+def test_a_list_of_numbers_comes_back_a_tuple_of_floats():
+    o = from_dict(Outer, {}, strict=False)
+    for value in ([0, 2.5, 3], (0.25, 0.5), [0.125]):
+        got = with_updates(o, {"table": value}).table
+        assert got == tuple(float(v) for v in value)
+        assert type(got) is tuple and all(type(v) is float for v in got)
 
 
 def test_describe_specs():

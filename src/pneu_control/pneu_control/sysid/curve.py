@@ -30,6 +30,8 @@ use (port 2 of the motor's valve in the paper's plumbing) is written as port
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -75,12 +77,23 @@ def ports_of(axis: str, base) -> tuple[str, ...]:
     return ("4", "2")
 
 
+@functools.lru_cache(maxsize=64)
+def _curves(v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`port_curves` of the (frozen, hashable) valve params ``v``, read-only: a fit
+    reads the start curve's shape thousands of times, once per Jacobian column."""
+    out = port_curves(v)
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
 def _g(v, port: str, u: np.ndarray) -> np.ndarray:
     """σ f of ``port`` of valve params ``v`` at voltages ``u`` (non-decreasing)."""
-    uu, f4, f2 = port_curves(v)
+    uu, f4, f2 = _curves(v)
     return _SIGN[port] * np.interp(u, uu, f4 if port == "4" else f2)
 
 
+@functools.lru_cache(maxsize=64)
 def _edges(v, port: str) -> tuple[float, float]:
     """(centre c, half-width w) of the start curve's dead band, V (|g| <= EDGE_FLOW)."""
     g = _g(v, port, _DENSE)
@@ -226,41 +239,64 @@ def _port_curve(v, port: str, h: dict[str, float]) -> tuple[np.ndarray, np.ndarr
     beyond the last fitted knot, the start's shape with the difference fading out at full
     opening.
     """
-    u_s = port_curves(v)[0]
+    u_s, g_s = _curves(v)[0], _port_g(v, port)
     c0, w0 = _edges(v, port)
     c, w = h.get("null", c0), max(h.get("band", w0), 0.0)
-    us, gs = [5.0 + c - w, 5.0 + c + w], [0.0, 0.0]
+    us, gs = [np.array([5.0 + c - w, 5.0 + c + w])], [np.zeros(2)]
     for side, sgn in (("+", 1.0), ("-", -1.0)):
         ku = [5.0 + c + sgn * w, *_knot_u(c, w, side).tolist()]
-        ku0 = [5.0 + c0 + sgn * w0, *_knot_u(c0, w0, side).tolist()]
+        spans = _spans(v, port, side)
         g_prev = 0.0
         j = 0
-        while j + 1 < min(len(ku), len(ku0)) and f"{side}{KNOTS_DV[j]:.2f}" in h:
+        while j + 1 < min(len(ku), len(spans) + 1) and f"{side}{KNOTS_DV[j]:.2f}" in h:
             g_k = g_prev + sgn * h[f"{side}{KNOTS_DV[j]:.2f}"]
-            a0, b0, a, b = ku0[j], ku0[j + 1], ku[j], ku[j + 1]
-            s_a, s_b = (float(x) for x in _g(v, port, np.array([a0, b0])))
-            inner = u_s[(sgn * (u_s - a0) > 0.0) & (sgn * (u_s - b0) < 0.0)]
-            for x0, sx in zip(inner, _g(v, port, inner)):
-                t = (x0 - a0) / (b0 - a0)
-                frac = (sx - s_a) / (s_b - s_a) if abs(s_b - s_a) > 1e-12 else t
-                us.append(float(a + t * (b - a)))
-                gs.append(g_prev + (g_k - g_prev) * frac)
-            us.append(b)
-            gs.append(g_k)
+            t, frac = spans[j]
+            a, b = ku[j], ku[j + 1]
+            us.append(a + t * (b - a))
+            gs.append(g_prev + (g_k - g_prev) * frac)
+            us.append(np.array([b]))
+            gs.append(np.array([g_k]))
             g_prev = g_k
             j += 1
         last = ku[j]  # the last fitted point (the edge if none): the start's shape beyond
         end = 10.0 if sgn > 0 else 0.0
-        b_last, b_end = (float(x) for x in _g(v, port, np.array([last, end])))
+        b_last, b_end = (float(x) for x in _SIGN[port] * np.interp([last, end], u_s, g_s))
         tail = np.append(u_s[sgn * (u_s - last) > 0.0], end)
+        b_tail = _SIGN[port] * np.interp(tail, u_s, g_s)
         span = b_end - b_last
-        for x, b in zip(tail, _g(v, port, tail)):
-            fade = (b_end - b) / span if abs(span) > 1e-12 else 0.0
-            us.append(float(x))
-            gs.append(float(b + (g_prev - b_last) * fade))
-    u, idx = np.unique(np.round(us, 6), return_index=True)
-    g = np.asarray(gs)[idx]
+        fade = (b_end - b_tail) / span if abs(span) > 1e-12 else np.zeros(len(tail))
+        us.append(tail)
+        gs.append(b_tail + (g_prev - b_last) * fade)
+    u, idx = np.unique(np.round(np.concatenate(us), 6), return_index=True)
+    g = np.concatenate(gs)[idx]
     return u, np.clip(np.maximum.accumulate(g), -FLOW_BOUND, FLOW_BOUND)
+
+
+def _port_g(v, port: str) -> np.ndarray:
+    """The signed flow f of ``port`` on the breakpoints of ``v``'s curve (what :func:`_g`
+    interpolates, times σ)."""
+    return _curves(v)[1 if port == "4" else 2]
+
+
+@functools.lru_cache(maxsize=64)
+def _spans(v, port: str, side: str) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """Per knot interval j of ``side`` of the start curve ``v``: its inner breakpoints as
+    (t, frac), the fraction of the interval's voltage and of its flow rise at each (what
+    :func:`_port_curve` maps onto the moved knots; it depends on ``v`` alone)."""
+    u_s = _curves(v)[0]
+    c0, w0 = _edges(v, port)
+    sgn = 1.0 if side == "+" else -1.0
+    ku0 = [5.0 + c0 + sgn * w0, *_knot_u(c0, w0, side).tolist()]
+    out = []
+    for a0, b0 in itertools.pairwise(ku0):
+        s_a, s_b = (float(x) for x in _g(v, port, np.array([a0, b0])))
+        inner = u_s[(sgn * (u_s - a0) > 0.0) & (sgn * (u_s - b0) < 0.0)]
+        t = (inner - a0) / (b0 - a0)
+        frac = (_g(v, port, inner) - s_a) / (s_b - s_a) if abs(s_b - s_a) > 1e-12 else t
+        for a in (t, frac):
+            a.setflags(write=False)
+        out.append((t, frac))
+    return tuple(out)
 
 
 def own_curve_plant(plant, axis: str, estimate: dict | None = None):

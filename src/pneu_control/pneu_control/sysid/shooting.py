@@ -210,11 +210,18 @@ class Trace:
     sim: np.ndarray  # (Σ lengths, N_REPLAY): the replayed rows
     period_states: np.ndarray  # (Σ lengths, N_STATE): the state each row's period starts from
     rows: np.ndarray  # first row of each segment
+    offsets: dict[str, float]  # the sensor offsets the start states were built with
+    p_c: np.ndarray | None  # the recorded cylinder pressures fed to a rotary replay
 
 
 def _setup(params, rec: Record, seg: Segments, offsets: dict[str, float], axes: str):
     """(prm, segment start states, the recorded cylinder pressures for a rotary replay)."""
     prm = rp.replay_params(params)
+    return (prm, *_starts(prm, params, rec, seg, offsets, axes))
+
+
+def _starts(prm, params, rec: Record, seg: Segments, offsets: dict[str, float], axes: str):
+    """(segment start states, the recorded cylinder pressures for a rotary replay)."""
     kbar = rp.mean_vane_factor(prm)
     spools = {a: _spool_pass(rec, prm, a)[0] for a in ("linear", "rotary")}
     states = initial_states(rec, seg, offsets, spools)
@@ -222,7 +229,7 @@ def _setup(params, rec: Record, seg: Segments, offsets: dict[str, float], axes: 
     if axes == "rotary":  # the seal torque reads the cylinder's pressures: feed the recorded ones
         p_c = np.column_stack([rec.y[c] - offsets.get(c, 0.0) for c in ("p_c1", "p_c2")])
     st = np.array([rp.replay_state(prm, params, kbar=kbar, **s0) for s0 in states])
-    return prm, st.reshape(len(seg), -1), p_c
+    return st.reshape(len(seg), -1), p_c
 
 
 def _outputs(sim: np.ndarray, offsets: dict[str, float]) -> dict[str, np.ndarray]:
@@ -256,7 +263,9 @@ def trace(
         st, prm, rec.u["linear"], rec.u["rotary"], seg.starts, seg.lengths, axes, p_c, kept
     )
     rows = np.concatenate(([0], np.cumsum(seg.lengths)[:-1])).astype(np.int64)
-    return _outputs(sim, offsets), Trace(rec, seg, axes, prm, st, sim, kept, rows)
+    return _outputs(sim, offsets), Trace(
+        rec, seg, axes, prm, st, sim, kept, rows, dict(offsets), p_c
+    )
 
 
 def simulate_from(params, base: Trace, offsets: dict[str, float]) -> dict[str, np.ndarray]:
@@ -266,8 +275,12 @@ def simulate_from(params, base: Trace, offsets: dict[str, float]) -> dict[str, n
     on nothing fitted); a segment whose start state changed, or any other change, replays
     whole. The rows before are ``base``'s."""
     rec, seg = base.rec, base.seg
-    prm, st, p_c = _setup(params, rec, seg, offsets, base.axes)
+    prm = rp.replay_params(params)
     where = rp.changed_openings(base.prm, prm)
+    if where is not None and offsets == base.offsets:
+        st, p_c = base.states, base.p_c  # a start state reads nothing of the flow tables
+    else:
+        st, p_c = _starts(prm, params, rec, seg, offsets, base.axes)
     n = seg.lengths
     first = np.zeros(len(seg), dtype=np.int64)
     if where is not None:

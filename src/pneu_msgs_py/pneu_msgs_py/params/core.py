@@ -235,6 +235,8 @@ def _check_value(key: str, value: Any, tp: Any, meta: Mapping[str, Any]) -> Any:
     elif typing.get_origin(tp) is tuple:
         if not isinstance(value, (list, tuple)):
             raise ParamError(key, value, "a list of numbers")
+        if all(type(v) is float for v in value) and all(map(math.isfinite, value)):
+            return tuple(value)  # the common case (a fit sets curves thousands of times)
         out = []
         for i, v in enumerate(value):
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):

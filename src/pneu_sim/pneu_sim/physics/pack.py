@@ -6,6 +6,7 @@ nominal flow, the spool's exact ZOH matrices, each port's flow curve sampled on 
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -47,6 +48,7 @@ def _expm(a: np.ndarray) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=64)
 def spool_zoh(omega_n: float, zeta: float, h: float) -> tuple[float, ...]:
     """Exact ZOH of s'' = ω_n² (u − s) − 2ζω_n s': (φ11, φ12, φ21, φ22, γ1, γ2)."""
     a = np.array([[0.0, 1.0], [-(omega_n**2), -2.0 * zeta * omega_n]])

@@ -26,8 +26,6 @@ MPYE-5-1/8-HF is 2×).
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 
 __all__ = [
@@ -94,7 +92,9 @@ def check_curve(u_curve, flow_4, flow_2) -> tuple[str, object, str] | None:
     n = len(u_curve)
     if n == 0 and not len(flow_4) and not len(flow_2):
         return None
-    if n < 2 or any(b <= a for a, b in itertools.pairwise(u_curve)):
+    # numpy's comparisons are Python's on floats (NaN compares False either way); a fit
+    # checks a curve per Jacobian column
+    if n < 2 or np.any(np.diff(np.asarray(u_curve, dtype=float)) <= 0.0):
         return (
             "u_curve",
             list(u_curve),
@@ -105,9 +105,10 @@ def check_curve(u_curve, flow_4, flow_2) -> tuple[str, object, str] | None:
     for name, f, sign in (("flow_4", flow_4, 1.0), ("flow_2", flow_2, -1.0)):
         if len(f) != n:
             return (name, list(f), f"{n} values, one per u_curve entry")
-        if any(abs(x) > FLOW_BOUND for x in f):
+        fa = np.asarray(f, dtype=float)
+        if np.any(np.abs(fa) > FLOW_BOUND):
             return (name, list(f), f"values in [-{FLOW_BOUND:g}, {FLOW_BOUND:g}]")
-        if any(sign * (b - a) < 0.0 for a, b in itertools.pairwise(f)):
+        if np.any(sign * np.diff(fa) < 0.0):
             word = "non-decreasing" if sign > 0 else "non-increasing"
             return (name, list(f), f"{word} in u (port {name[-1]})")
     return None
