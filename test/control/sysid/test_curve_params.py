@@ -158,3 +158,22 @@ def test_the_curve_error_splits_where_fitted_and_beyond():
     assert whole > 0.05
     assert inside == pytest.approx(0.0, abs=1e-9)
     assert beyond == pytest.approx(whole)
+
+
+def test_a_valve_built_with_lists_gives_the_curve_of_its_tuples():
+    """The curve's start shape is memoised on the (hashable) valve params; a params object
+    built directly with lists (not through the loader, which makes tuples) is computed
+    afresh and gives the same curve, to the bit."""
+    import dataclasses
+
+    start = PlantParams()
+    rec = _record(np.linspace(2.0, 8.0, 60_000))
+    params, _sup, values = _handles_at_start(start, rec)
+    moved = {n: x + (0.01 if n.endswith("@null") else 0.05 * x) for n, x in values.items()}
+    v = start.valve_linear
+    listed = dataclasses.replace(v, du_table=list(v.du_table), flow_table=list(v.flow_table))
+    with pytest.raises(TypeError):
+        hash(listed)
+    as_lists = dataclasses.replace(start, valve_linear=listed)
+    assert curve.base_value(as_lists, params[0].name) == curve.base_value(start, params[0].name)
+    assert curve.updates(as_lists, moved) == curve.updates(start, moved)

@@ -77,10 +77,26 @@ def ports_of(axis: str, base) -> tuple[str, ...]:
     return ("4", "2")
 
 
-@functools.lru_cache(maxsize=64)
+def _memo(fn):
+    """``fn`` memoised on its (frozen, hashable) arguments; called afresh on unhashable ones
+    (a params object built directly with lists, not through the loader)."""
+    cached = functools.lru_cache(maxsize=64)(fn)
+
+    @functools.wraps(fn)
+    def call(*args):
+        try:
+            hash(args)
+        except TypeError:
+            return fn(*args)
+        return cached(*args)
+
+    return call
+
+
+@_memo
 def _curves(v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`port_curves` of the (frozen, hashable) valve params ``v``, read-only: a fit
-    reads the start curve's shape thousands of times, once per Jacobian column."""
+    """:func:`port_curves` of the valve params ``v``, read-only: a fit reads the start
+    curve's shape thousands of times, once per Jacobian column."""
     out = port_curves(v)
     for a in out:
         a.setflags(write=False)
@@ -93,7 +109,7 @@ def _g(v, port: str, u: np.ndarray) -> np.ndarray:
     return _SIGN[port] * np.interp(u, uu, f4 if port == "4" else f2)
 
 
-@functools.lru_cache(maxsize=64)
+@_memo
 def _edges(v, port: str) -> tuple[float, float]:
     """(centre c, half-width w) of the start curve's dead band, V (|g| <= EDGE_FLOW)."""
     g = _g(v, port, _DENSE)
@@ -278,7 +294,7 @@ def _port_g(v, port: str) -> np.ndarray:
     return _curves(v)[1 if port == "4" else 2]
 
 
-@functools.lru_cache(maxsize=64)
+@_memo
 def _spans(v, port: str, side: str) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
     """Per knot interval j of ``side`` of the start curve ``v``: its inner breakpoints as
     (t, frac), the fraction of the interval's voltage and of its flow rise at each (what
