@@ -255,7 +255,8 @@ def _port_curve(v, port: str, h: dict[str, float]) -> tuple[np.ndarray, np.ndarr
     beyond the last fitted knot, the start's shape with the difference fading out at full
     opening.
     """
-    u_s, g_s = _curves(v)[0], _port_g(v, port)
+    u_s, f4, f2 = _curves(v)
+    g_s = f4 if port == "4" else f2
     c0, w0 = _edges(v, port)
     c, w = h.get("null", c0), max(h.get("band", w0), 0.0)
     us, gs = [np.array([5.0 + c - w, 5.0 + c + w])], [np.zeros(2)]
@@ -286,12 +287,6 @@ def _port_curve(v, port: str, h: dict[str, float]) -> tuple[np.ndarray, np.ndarr
     u, idx = np.unique(np.round(np.concatenate(us), 6), return_index=True)
     g = np.concatenate(gs)[idx]
     return u, np.clip(np.maximum.accumulate(g), -FLOW_BOUND, FLOW_BOUND)
-
-
-def _port_g(v, port: str) -> np.ndarray:
-    """The signed flow f of ``port`` on the breakpoints of ``v``'s curve (what :func:`_g`
-    interpolates, times σ)."""
-    return _curves(v)[1 if port == "4" else 2]
 
 
 @_memo
