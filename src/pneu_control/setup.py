@@ -29,7 +29,8 @@ setup(
         "pneu_driver",
         "numpy>=1.26",
         "numba>=0.59",  # pneu_control.fastloop: the compiled closed loop
-        "scipy>=1.15",  # sweeps: qmc (rng= keyword), rank correlation; identify: least_squares
+        "scipy>=1.16",  # sweeps: qmc (rng= keyword), rank correlation; identify: least_squares
+        "threadpoolctl>=3.1",  # identify: BLAS at one thread beside the replay's workers
         "distributed>=2024.8",  # pneu sweep --executor dask
         "PyYAML>=6.0",
         "matplotlib>=3.7",

@@ -57,6 +57,7 @@ ROSDEP_PY = {
     "matplotlib": "python3-matplotlib",
     "tqdm": "python3-tqdm",
     "filelock": "python3-filelock",
+    "threadpoolctl": "python3-threadpoolctl",
     "cryptography": "python3-cryptography",
 }
 # pip-only libraries (no rosdep key): must be in setup.py install_requires instead

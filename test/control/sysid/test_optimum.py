@@ -145,3 +145,99 @@ def test_a_continuation_in_segment_length_leaves_a_compensating_valley(plants, r
     for name, tol in tolerance.items():
         err = got[name] / t[name] - 1.0
         assert abs(err) < tol, f"{name}: {got[name]:.4g} vs true {t[name]:.4g} ({err:+.1%})"
+
+
+def _counted(monkeypatch) -> list[int]:
+    """Jacobians by differences every Problem computes (a list that grows by one each)."""
+    calls: list[int] = []
+    real = fit.Problem._differences
+
+    def counting(self, fn, z, f0):
+        calls.append(1)
+        return real(self, fn, z, f0)
+
+    monkeypatch.setattr(fit.Problem, "_differences", counting)
+    return calls
+
+
+def test_one_jacobian_every_step_is_scipys_own_trf_to_the_bit(plants, record):
+    """jacobian_every = 1: every Jacobian by differences, no update, no restart -- exactly
+    least_squares' trf with that Jacobian."""
+    from scipy.optimize import least_squares
+
+    base, _truth = plants
+    names = ("rotary.J_m", "rotary.M_c", "rotary.V_m1", "valve_rotary.Q_n")
+    opts = replace(fit.FitOptions(), params=names, jacobian_every=1)
+    problem = fit.Problem("rotary", base, [record], opts)
+    z0 = problem.z_start({"rotary.J_m": 1.3 * base.rotary.J_m})
+    mine = problem._least_squares(problem.residuals, z0, problem._plain_jacobian)
+    theirs = least_squares(
+        problem.residuals,
+        z0,
+        jac=problem._plain_jacobian,
+        bounds=(problem.lo, problem.hi),
+        method="trf",
+        x_scale=1.0,
+        max_nfev=opts.max_nfev,
+        xtol=opts.xtol,
+        ftol=opts.ftol,
+    )
+    assert np.array_equal(mine.x, theirs.x) and np.array_equal(mine.jac, theirs.jac)
+    assert mine.nfev == theirs.nfev
+
+
+def test_broydens_updates_reach_the_same_optimum_on_fewer_jacobians(plants, record, monkeypatch):
+    """The motor's mechanics and flow from 30 % off, solved as identify solves (the
+    continuation in segment length): with a Jacobian by differences every third step
+    (Broyden's update between) it ends where every-step Jacobians end -- the cost within
+    the stopping rule's tolerance, the values within a tenth of their 95 % interval and of
+    the truth's -- on fewer Jacobians; the Jacobian a solve returns (what its statistics
+    read) is a fresh one at its optimum."""
+    base, truth = plants
+    names = ("rotary.J_m", "rotary.M_c", "rotary.V_m1", "valve_rotary.Q_n", "supply.p_s_rotary")
+    t = {p.name: model.base_value(truth, p) for p in model.AXIS_PARAMS["rotary"]}
+    start = {n: t[n] * f for n, f in zip(names, (1.3, 0.7, 1.3, 0.8, 1.1))}
+    done = {}
+    for every in (1, 3):
+        opts = replace(fit.FitOptions(), params=names, jacobian_every=every)
+        problem = fit.Problem("rotary", base, [record], opts)
+        calls = _counted(monkeypatch)
+        solved = fit._continued(problem, start, lambda _m: None)
+        n_jac = len(calls)
+        monkeypatch.undo()
+        z = problem.z_start(solved.start())
+        res = problem._least_squares(problem.residuals, z, problem._plain_jacobian)
+        assert np.array_equal(res.jac, problem._plain_jacobian(res.x))  # fresh at the optimum
+        done[every] = (solved, n_jac)
+    (plain, n_plain), (upd, n_upd) = done[1], done[3]
+    assert n_upd < n_plain, (n_upd, n_plain)
+    assert abs(upd.cost - plain.cost) <= fit.FitOptions().ftol * plain.cost, (upd.cost, plain.cost)
+    for i, name in enumerate(plain.names):
+        gap = abs(upd.value[i] - plain.value[i])
+        assert gap <= 0.1 * plain.ci95(i), (name, upd.value[i], plain.value[i])
+        assert abs(upd.value[i] / t[name] - 1.0) < 0.01, (name, upd.value[i], t[name])
+
+
+def test_the_motors_fit_written_at_another_polytropic_index_is_the_same_twin(plants, record):
+    """The motor sees n only as n/V_m1 and n/V_m2: its fit made at the base's index and
+    written at the cylinder's (identify fits the axes at once) replays the same, its volumes
+    scaled, and their intervals widened by the index's own."""
+    base, _truth = plants
+    names = ("rotary.V_m1", "rotary.V_m2", "rotary.J_m")
+    opts = replace(fit.FitOptions(), params=names, max_nfev=3)
+    made = fit.Problem("rotary", base, [record], opts).solve(None, lambda _m: None)
+    n = 1.31
+    k = n / base.ambient.n_poly
+    moved = fit.in_polytropic_index(made, n, rel_sigma_n=0.02)
+    assert moved.plant.ambient.n_poly == n
+    for i, name in enumerate(made.names):
+        scale = k if name.startswith("rotary.V_") else 1.0
+        assert moved.value[i] == pytest.approx(scale * made.value[i], rel=1e-12)
+        extra = 0.02 * moved.value[i] if name.startswith("rotary.V_") else 0.0
+        assert moved.sigma[i] == pytest.approx(np.hypot(scale * made.sigma[i], extra), rel=1e-12)
+    still = replace(opts, params=())
+    before = fit.Problem("rotary", made.plant, [record], still).residuals(np.zeros(1))
+    after = fit.Problem("rotary", moved.plant, [record], still).residuals(np.zeros(1))
+    assert np.max(np.abs(after - before)) <= 1e-9 * np.max(np.abs(before))
+    # the linear axis has no such freedom: the piston's moving volumes separate n
+    assert fit.in_polytropic_index(replace(made, axis="linear"), n).value == made.value

@@ -1,14 +1,17 @@
 """Output-error fit of the twin to bags: least squares over the uncertain parameters, with statistics.
 
 Per axis (the cylinder and the motor share only the polytropic index, fitted
-on the cylinder first), the residual is the difference between each recorded
+on the cylinder; the motor sees it only as n/V: :func:`in_polytropic_index`), the
+residual is the difference between each recorded
 signal and the twin replayed on the recorded voltages
 (:mod:`pneu_control.sysid.shooting`), signal by signal divided by the
 signal's spread, so the cost is the sum over signals of (1 − fit)² with fit
 as ``pneu validate`` reports it. ``scipy.optimize.least_squares`` (trust
 region reflective, within the physical bounds of
 :mod:`pneu_control.sysid.model`) minimises it; the Jacobian is by finite
-differences of relative size ``diff_step``.
+differences of relative size ``diff_step`` (its columns on the replay's worker threads)
+every ``jacobian_every``-th step, Broyden's secant update between
+(:meth:`Problem._least_squares`).
 
 Besides the plant parameters each bag gets its pressure sensors' offsets
 (nuisance parameters: the Huba 511's ±0.5 % FS), reported but not written
@@ -40,7 +43,15 @@ import numpy as np
 from pneu_control.sysid import model, shooting, starts
 from pneu_control.sysid.record import AXIS_SIGNALS, Record
 
-__all__ = ["AxisFit", "FitOptions", "Problem", "fit_axis", "refit", "with_replicate"]
+__all__ = [
+    "AxisFit",
+    "FitOptions",
+    "Problem",
+    "fit_axis",
+    "in_polytropic_index",
+    "refit",
+    "with_replicate",
+]
 
 _OFFSET_WIDTH = 5e3  # Pa: z = 1 is one Huba accuracy band
 # Huba 511: ±0.5 % FS = ±5 kPa; the bound allows 1.5x that, so an offset cannot
@@ -67,6 +78,7 @@ class FitOptions:
     settle_segment_s: float = 0.5  # a solve's first pass: shorter segments (see _continued)
     settle_every: int = 2  # ... every 2nd of them
     curve: bool = True  # last stage: the valve's own curve (pneu_control.sysid.curve)
+    jacobian_every: int = 3  # a Jacobian by differences every 3rd step, Broyden's between
 
 
 @dataclass
@@ -391,6 +403,47 @@ def with_replicate(fit: AxisFit, draws: list[AxisFit]) -> AxisFit:
     )
 
 
+MOTOR_VOLUMES = ("rotary.V_m1", "rotary.V_m2")
+
+
+def in_polytropic_index(fit: AxisFit, n: float, rel_sigma_n: float = 0.0) -> AxisFit:
+    """The motor's ``fit``, made at its plant's polytropic index, written for the index ``n``
+    (relative 1 σ ``rel_sigma_n``).
+
+    The motor sees n only as n/V_m1 and n/V_m2 (Eq. 4 at its fixed volumes: the kernel's
+    c = n R T0 / V), so its volumes -- values, σ and the fitted plant -- scale by n / n_fit
+    and the twin is the same (its bounds were read at n_fit); what it identifies is V/n, so
+    a volume's relative variance gains n's."""
+    from pneu_msgs_py.params.core import with_updates
+
+    k = n / fit.plant.ambient.n_poly
+    if fit.axis != "rotary" or (k == 1.0 and rel_sigma_n == 0.0):
+        return fit
+    f = [k if name in MOTOR_VOLUMES else 1.0 for name in fit.names]
+
+    def scaled(xs: list[float]) -> list[float]:
+        return [x * g for x, g in zip(xs, f)] if xs else xs
+
+    value = scaled(fit.value)
+    sigma = [
+        math.hypot(s, v * rel_sigma_n) if name in MOTOR_VOLUMES else s
+        for name, s, v in zip(fit.names, scaled(fit.sigma), value)
+    ]
+    rot = fit.plant.rotary
+    plant = with_updates(
+        fit.plant, {"ambient.n_poly": n, "rotary.V_m1": rot.V_m1 * k, "rotary.V_m2": rot.V_m2 * k}
+    )
+    return replace(
+        fit,
+        value=value,
+        sigma=sigma,
+        sigma_fit=scaled(fit.sigma_fit),
+        sigma_iid=scaled(fit.sigma_iid),
+        replicate_shift=scaled(fit.replicate_shift),
+        plant=plant,
+    )
+
+
 def _flow_curve_start(axis, base, records, options, first, offsets, log):
     """Stage 1 on ``base``: the start values of the flow curve (and offsets) and their cost."""
     long_ = Problem(axis, base, records, replace(options, params=first))
@@ -430,6 +483,7 @@ class Problem:
         parameters beyond the axis's own (a valve's curve knots)."""
         self.axis, self.base, self.options = axis, base, options
         self.records, self.extra = records, tuple(extra)
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # the latest (z, residuals)
         known = model.AXIS_PARAMS[axis] + tuple(extra)
         self.params = tuple(p for p in known if p.name in options.params)
         self.p0 = [model.base_value(base, p) for p in self.params]
@@ -536,8 +590,6 @@ class Problem:
         and bounds: the same bits as ``jac="2-point"``), each column's replay started again
         from the first period its change can act in (:func:`shooting.simulate_from`: a curve
         knot acts only where the valve opens that far)."""
-        from scipy.optimize._numdiff import approx_derivative  # what least_squares calls
-
         vals, offs = self.unpack(z)
         plant = model.apply(self.base, self.params, vals)
         kept = [shooting.trace(plant, r, s, off, self.axis) for (r, s), off in zip(self.used, offs)]  # fmt: skip
@@ -548,9 +600,29 @@ class Problem:
             return self._stack([shooting.simulate_from(plant_x, t, o) for (_, t), o in zip(kept, offs_x)])  # fmt: skip
 
         f0 = self._stack([sim for sim, _ in kept])
-        opt = self.options
+        return self._differences(column, z, f0)
+
+    def _plain_jacobian(self, z: np.ndarray) -> np.ndarray:
+        """least_squares' own 2-point Jacobian of :meth:`residuals` (the same bits as
+        ``jac="2-point"``), its columns on the replay's workers."""
+        last = self._last
+        f0 = last[1] if last is not None and np.array_equal(last[0], z) else self.residuals(z)
+        return self._differences(self.residuals, z, f0)
+
+    def _differences(self, fn, z: np.ndarray, f0: np.ndarray) -> np.ndarray:
+        """scipy's ``approx_derivative`` of ``fn`` at ``z`` (2-point, least_squares' steps and
+        bounds), one column a task on the replay's workers (:mod:`pneu_sim.physics.workers`)."""
+        from pneu_sim.physics import workers
+        from scipy.optimize._numdiff import approx_derivative  # what least_squares calls
+
         return approx_derivative(
-            column, z, method="2-point", rel_step=opt.diff_step, f0=f0, bounds=(self.lo, self.hi)
+            fn,
+            z,
+            method="2-point",
+            rel_step=self.options.diff_step,
+            f0=f0,
+            bounds=(self.lo, self.hi),
+            workers=workers.map_tasks,
         )
 
     def cost(self, z: np.ndarray) -> float:
@@ -558,9 +630,8 @@ class Problem:
         return 0.5 * float(r @ r)
 
     def solve(self, start: dict[str, float] | None, log: Callable[[str], None]) -> AxisFit:
-        from scipy.optimize import least_squares
 
-        axis, params, opt = self.axis, self.params, self.options
+        axis, params = self.axis, self.params
         z0 = self.z_start(start)
         t0 = time.perf_counter()
         r0 = self.residuals(z0)
@@ -570,35 +641,100 @@ class Problem:
         # shared Jacobian; without knots every column replays whole and the trace would
         # only cost (scipy's own differences, the same bits either way)
         shared = any(model.is_handle(p.name) for p in params)
-        every = 1 if shared else len(z0) + 1  # a line per step
 
         def tracked(z):
             n_eval[0] += 1
             r = self.residuals(z)
-            if (n_eval[0] - 1) % every == 0:
-                vals, _ = self.unpack(z)
-                shown = ", ".join(
-                    f"{p.name.split('.', 1)[-1]}={v:.4g}" for p, v in zip(params, vals)
-                )
-                log(
-                    f"  {axis} eval {n_eval[0]:4d}  cost {0.5 * float(r @ r):.5g}  "
-                    f"({time.perf_counter() - t0:.0f} s)  {shown}"
-                )
+            self._last = (z.copy(), r)  # what the Jacobian at z differences against
+            vals, _ = self.unpack(z)
+            shown = ", ".join(f"{p.name.split('.', 1)[-1]}={v:.4g}" for p, v in zip(params, vals))
+            log(
+                f"  {axis} eval {n_eval[0]:4d}  cost {0.5 * float(r @ r):.5g}  "
+                f"({time.perf_counter() - t0:.0f} s)  {shown}"
+            )
             return r
 
-        res = least_squares(
-            tracked,
-            z0,
-            bounds=(self.lo, self.hi),
-            jac=self.jacobian if shared else "2-point",
-            method="trf",
-            x_scale=1.0,
-            diff_step=opt.diff_step,
-            max_nfev=opt.max_nfev,
-            xtol=opt.xtol,
-            ftol=opt.ftol,
-        )
+        res = self._least_squares(tracked, z0, self.jacobian if shared else self._plain_jacobian)
         return self._statistics(res, cost0, time.perf_counter() - t0)
+
+    def _least_squares(self, fun, z0: np.ndarray, jacobian) -> object:
+        """scipy's trust-region reflective least squares within the bounds, its Jacobian by
+        differences (``jacobian``) only at the start, every ``jacobian_every``-th accepted
+        step and after a step the Jacobian mispredicted (the cost fell by less than a quarter
+        of what it promised); between, Broyden's rank-one secant update from every point
+        evaluated (Broyden 1965, as in Madsen, Nielsen & Tingleff, *Methods for non-linear
+        least squares problems*, 2004, sec. 3.4). A Jacobian by differences costs a replay per
+        parameter; an update, none.
+
+        A solve that stops on an updated Jacobian (its steps may have shrunk on the
+        update's error, not at the optimum) starts again from there on a fresh one, until a
+        restart gains less than ``ftol``; the result carries the fresh Jacobian at the
+        optimum (the statistics read it). ``jacobian_every`` = 1 is plain trf."""
+        from scipy.optimize import least_squares
+
+        opt = self.options
+        seen: list[tuple[np.ndarray, np.ndarray]] = []  # evaluated since the last Jacobian
+        # the Jacobian in use (at x, f), whether by differences, updates since; whether the
+        # latest point evaluated was a step taken from a Jacobian by differences
+        now: dict = {"x": None, "f": None, "J": None, "fresh": False, "age": 0, "trial": True}
+
+        def evaluated(z: np.ndarray) -> np.ndarray:
+            r = fun(z)
+            now["trial"] = now["J"] is None or now["fresh"]
+            seen.append((z.copy(), r))
+            return r
+
+        def differenced(z: np.ndarray, f: np.ndarray) -> np.ndarray:
+            now.update(x=z.copy(), f=f, J=jacobian(z), fresh=True, age=0)
+            return now["J"]
+
+        def jac(z: np.ndarray) -> np.ndarray:
+            f = next(r for x, r in reversed(seen) if np.array_equal(x, z))
+            J0, x0, f0 = now["J"], now["x"], now["f"]
+            seen_now = list(seen)
+            seen.clear()
+            if J0 is not None and np.array_equal(x0, z):  # a restart where the last solve ended
+                return J0 if now["fresh"] else differenced(z, f)
+            stale = J0 is None or now["age"] + 1 >= opt.jacobian_every
+            if not stale:
+                c0, c = float(f0 @ f0), float(f @ f)
+                lin = f0 + J0 @ (z - x0)
+                promised = c0 - float(lin @ lin)
+                # mispredicted, or a step so small that trf may stop here: a fresh one
+                stale = promised <= 0.0 or c0 - c < 0.25 * promised or c0 - c <= opt.ftol * c0
+            if stale:
+                return differenced(z, f)
+            J = J0.copy()
+            for x, r in seen_now:  # each evaluated point's secant, in turn
+                dx = x - x0
+                dd = float(dx @ dx)
+                if dd > 0.0:
+                    J += np.outer(r - f0 - J @ dx, dx / dd)
+            now.update(x=z.copy(), f=f, J=J, fresh=False, age=now["age"] + 1)
+            return J
+
+        z, nfev = z0, 0
+        while True:
+            res = least_squares(
+                evaluated,
+                z,
+                bounds=(self.lo, self.hi),
+                jac=jac,
+                method="trf",
+                x_scale=1.0,
+                max_nfev=max(opt.max_nfev - nfev, 1),
+                xtol=opt.xtol,
+                ftol=opt.ftol,
+            )
+            nfev += res.nfev
+            res.nfev = nfev
+            # trf stopped on a step it took from an updated Jacobian (its steps may have
+            # shrunk on the update's error): again from there, on a fresh one
+            if now["trial"] or nfev >= opt.max_nfev:
+                if not (now["fresh"] and np.array_equal(now["x"], res.x)):
+                    res.jac = jacobian(res.x)
+                return res
+            z = res.x
 
     def _statistics(self, res, cost0: float, wall: float) -> AxisFit:
         n_p = self.n_p

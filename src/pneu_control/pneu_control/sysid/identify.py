@@ -1,8 +1,12 @@
 """From bags to a calibrated plant.yaml: noise from quiet segments, the output-error fits, the file.
 
 Order: the sensor noise (first differences in the quiet segments: their
-standard deviation within 5 robust σ of the median, /√2, blind to slow drifts), then the cylinder (which also
-fixes the polytropic index), then the motor with that index. Each fitted
+standard deviation within 5 robust σ of the median, /√2, blind to slow drifts), then the
+cylinder and the motor at once, each on a thread of its own, their replays on one pool
+(:mod:`pneu_sim.physics.workers`). They share one value: the polytropic index, which the
+cylinder fixes and the motor sees only as n/V (its volumes are fixed), so the motor is fitted
+at the base's index and its volumes are written at the cylinder's (the same twin), their
+intervals widened by the index's. Each fitted
 value goes into a copy of the base plant.yaml tree -- every other leaf and
 every key of a leaf (unit, source, and any optional key such as a ``range``)
 is kept -- with ``source: identified from <bags> (±x %)`` (95 % interval).
@@ -24,9 +28,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pneu_sim.physics import workers
+from threadpoolctl import threadpool_limits
 
 from pneu_control.sysid import model
-from pneu_control.sysid.fit import STAGES, AxisFit, FitOptions, fit_axis
+from pneu_control.sysid.fit import STAGES, AxisFit, FitOptions, fit_axis, in_polytropic_index
 from pneu_control.sysid.record import Record
 
 __all__ = [
@@ -226,36 +232,45 @@ def identify(
         raise ValueError("no axis is excited in these bags (no design, no varying valve command)")
     notes = [n for r in records for n in (f"{r.name}: {x}" for x in r.notes)]
     noise = estimate_noise(records, axes)
-    plant = base
-    fits: dict[str, AxisFit] = {}
     kept: list[str] = []
-    total = STAGES * len(axes)
-    done = [0]
+    order = tuple(a for a in ("linear", "rotary") if a in axes)
+    recs = {axis: _excited(records, axis) for axis in order}
+    done = dict.fromkeys(order, 0)
 
-    def stage() -> None:
-        done[0] += 1
-        if progress is not None:
-            progress(done[0], total)
+    def counted(axis: str) -> Callable[[], None]:
+        def stage() -> None:
+            done[axis] += 1
+            if progress is not None:
+                progress(sum(done.values()), STAGES * len(order))
 
-    recs = {}
-    for i, axis in enumerate(a for a in ("linear", "rotary") if a in axes):
-        recs[axis] = _excited(records, axis)
-        log(
-            f"{axis}: fitting {len(model.AXIS_PARAMS[axis])} parameters to {len(recs[axis])} bag(s)"
-        )
-        done[0] = STAGES * i
-        fit = fit_axis(axis, plant, recs[axis], options, log=log, stage=stage)
-        done[0] = STAGES * (i + 1)
+        return stage
+
+    def fitted(axis: str) -> AxisFit:
+        log(f"{axis}: fitting {len(model.AXIS_PARAMS[axis])} parameters to {len(recs[axis])} bag(s)")  # fmt: skip
+        fit = fit_axis(axis, base, recs[axis], options, log=log, stage=counted(axis))
+        done[axis] = STAGES
         if progress is not None:
-            progress(done[0], total)
-        fits[axis] = fit
-        plant = _taken(plant, fit, [])
-        log(
-            f"{axis}: cost {fit.cost_start:.4g} -> {fit.cost:.4g} in {fit.nfev} steps, "
-            f"{fit.wall_s:.0f} s"
-        )
-    if replicate:
-        fits = _replicated(base, fits, recs, noise, options, log)
+            progress(sum(done.values()), STAGES * len(order))
+        log(f"{axis}: cost {fit.cost_start:.4g} -> {fit.cost:.4g} in {fit.nfev} steps, {fit.wall_s:.0f} s")  # fmt: skip
+        return fit
+
+    # the replay's workers run every core (pneu_sim.physics.workers): BLAS threads beside
+    # them only wait for cores (OpenBLAS's spin: a quarter more CPU, a fifth more wall time)
+    with threadpool_limits(1, "blas"):
+        # both axes at once: they share no fitted value (the motor sees the cylinder's n
+        # only as n/V, so its fit runs at the base's n and is written in the cylinder's)
+        fits = dict(zip(order, workers.concurrently([lambda a=a: fitted(a) for a in order])))
+        if "linear" in fits and "rotary" in fits:
+            n = _taken(base, fits["linear"], []).ambient.n_poly
+            fits["rotary"] = in_polytropic_index(fits["rotary"], n)
+        if replicate:
+            fits = _replicated(base, fits, recs, noise, options, log)
+    if "linear" in fits and "rotary" in fits and "ambient.n_poly" in fits["linear"].names:
+        lin = fits["linear"]  # the motor's volumes are known as far as the cylinder's n is
+        i = lin.names.index("ambient.n_poly")
+        n = fits["rotary"].plant.ambient.n_poly
+        if n == lin.value[i]:  # taken (else the base's n: its own tolerance, not the fit's)
+            fits["rotary"] = in_polytropic_index(fits["rotary"], n, lin.sigma[i] / n)
     plant = base
     for fit in fits.values():
         plant = _taken(plant, fit, kept)
@@ -339,22 +354,26 @@ def _replicated(base, fits: dict[str, AxisFit], recs, noise, options, log) -> di
     log(
         f"  replicates: {REPLICATES} excitations of the identified twin, {time.perf_counter() - t0:.0f} s"
     )
-    out = {}
-    fitted_base = base  # the rotary fit started from the cylinder's values, as identify's did
+    starts, fitted_base = {}, base  # the motor's fit is written in the cylinder's values
     for axis, fit in fits.items():
-        mine = [[r for r in reps if axis in r.designs] for reps in draws]
-        if not all(mine):
+        starts[axis] = fitted_base
+        fitted_base = _taken(fitted_base, fit, [])
+    mine = {a: [[r for r in reps if a in r.designs] for reps in draws] for a in fits}
+    jobs = [(a, m) for a in fits if all(mine[a]) for m in mine[a]]
+    t1 = time.perf_counter()
+    again = workers.concurrently(
+        [lambda a=a, m=m: refit(a, starts[a], m, fits[a], options) for a, m in jobs]
+    )
+    out = {}
+    for axis, fit in fits.items():
+        mine_again = [d for (a, _m), d in zip(jobs, again) if a == axis]
+        if not mine_again:
             log(f"  {axis}: no design in the bags: intervals from the fit alone (no replicate)")
             out[axis] = fit
-        else:
-            t1 = time.perf_counter()
-            again = [refit(axis, fitted_base, m, fit, options) for m in mine]
-            log(
-                f"  {axis}: fitted again on each: {time.perf_counter() - t1:.0f} s, "
-                + ", ".join(f"{a.nfev} steps" for a in again)
-            )
-            out[axis] = with_replicate(fit, again)
-        fitted_base = _taken(fitted_base, fit, [])
+            continue
+        log(f"  {axis}: fitted again on each: " + ", ".join(f"{d.nfev} steps" for d in mine_again))
+        out[axis] = with_replicate(fit, mine_again)
+    log(f"  the {len(jobs)} fits again, at once: {time.perf_counter() - t1:.0f} s")
     log(
         "  replicate on the identified twin (excited and fitted again): "
         f"{time.perf_counter() - t0:.0f} s"

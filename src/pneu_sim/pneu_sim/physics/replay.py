@@ -24,9 +24,9 @@ import math
 from pathlib import Path
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
-from pneu_sim.physics import jit_cache
+from pneu_sim.physics import jit_cache, workers
 from pneu_sim.physics import kernel as k
 from pneu_sim.physics.pack import pack_params
 from pneu_sim.physics.params import PlantParams
@@ -98,16 +98,16 @@ def _run(st, prm, u_l, u_r, i0, n, out, o0, which, p_c, feed, trace):
         out[r, 5] = (st[k.S_TH] - th0) / T
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _replay(st, prm, u_l, u_r, out, which, p_c):
     feed = which == 2 and p_c.shape[0] == u_l.shape[0]
     _run(st, prm, u_l, u_r, 0, u_l.shape[0], out, 0, which, p_c, feed, np.zeros((0, k.N_STATE)))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def _replay_segments(states, prm, u_l, u_r, starts, lengths, rows, out, which, p_c, trace):
     feed = which == 2 and p_c.shape[0] == u_l.shape[0]
-    for s in prange(starts.shape[0]):  # the segments are independent: one per thread
+    for s in range(starts.shape[0]):  # the segments are independent (workers split them)
         st = states[s].copy()
         _run(st, prm, u_l, u_r, starts[s], lengths[s], out, rows[s], which, p_c, feed, trace)
 
@@ -373,8 +373,9 @@ def replay_segments(
     p_c: np.ndarray | None = None,
     trace: np.ndarray | None = None,
 ) -> np.ndarray:
-    """:func:`replay` of many segments at once, in parallel (numba threads; each segment's
-    arithmetic is :func:`replay`'s, so the rows are the same bits).
+    """:func:`replay` of many segments at once, in parallel (split over the replay's worker
+    threads, :mod:`pneu_sim.physics.workers`; each segment's arithmetic is :func:`replay`'s,
+    so the rows are the same bits).
 
     Segment s starts from ``states[s]`` (not modified) at period ``starts[s]`` of the
     full-record voltages ``u_linear``/``u_rotary`` and runs ``lengths[s]`` periods;
@@ -396,8 +397,31 @@ def replay_segments(
     tr = np.zeros((0, k.N_STATE)) if trace is None else trace
     if tr.shape[0] and tr.shape != (out.shape[0], k.N_STATE):
         raise ValueError(f"trace: shape {tr.shape} refused; allowed: ({out.shape[0]}, {k.N_STATE})")
-    _replay_segments(st, prm, u_l, u_r, i0, n, rows, out, AXES_CODE[axes], pc, tr)
+    which = AXES_CODE[axes]
+
+    def chunk(c: np.ndarray) -> None:
+        _replay_segments(st[c], prm, u_l, u_r, i0[c], n[c], rows[c], out, which, pc, tr)
+
+    workers.run_all([lambda c=c: chunk(c) for c in _chunks(n, workers.size())])
     return out
+
+
+_MIN_CHUNK = 2000  # periods: below this a chunk costs more to hand over than to replay
+
+
+def _chunks(lengths: np.ndarray, k: int) -> list[np.ndarray]:
+    """The segments' indices in at most ``k`` chunks of nearly equal periods (longest
+    first, each to the lightest chunk), each in ascending order."""
+    k = int(min(k, max(1, lengths.sum() // _MIN_CHUNK), len(lengths)))
+    if k <= 1:
+        return [np.arange(len(lengths))]
+    load = np.zeros(k)
+    owner = np.empty(len(lengths), dtype=np.int64)
+    for i in np.argsort(-lengths, kind="stable").tolist():
+        j = int(np.argmin(load))
+        owner[i] = j
+        load[j] += lengths[i]
+    return [np.flatnonzero(owner == j) for j in range(k)]
 
 
 # the compiled functions above inline the kernel (another file): keep their caches in step
