@@ -241,3 +241,28 @@ def test_the_motors_fit_written_at_another_polytropic_index_is_the_same_twin(pla
     assert np.max(np.abs(after - before)) <= 1e-9 * np.max(np.abs(before))
     # the linear axis has no such freedom: the piston's moving volumes separate n
     assert fit.in_polytropic_index(replace(made, axis="linear"), n).value == made.value
+
+
+def test_a_basin_is_searched_at_fewer_substeps_a_fraction_of_the_noise_away(plants, record):
+    """The passes that only look for a basin (Problem(coarse=True)) replay at
+    ``basin_n_sub`` substeps: the outputs move by a small fraction of the sensors' noise
+    from the plant's own integration, so the basin is the same; the fit's result replays at
+    the plant's own."""
+    from pneu_control.sysid import shooting
+
+    _base, truth = plants
+    opts = replace(fit.FitOptions(), params=())
+    s = truth.sensors
+    noise = {"x": s.laser.sigma_m, "p_m1": s.pressure.sigma_v * s.pressure.fs / s.pressure.v_fs}
+    noise |= {"p_c1": noise["p_m1"], "p_c2": noise["p_m1"]}
+    for axis, signals in (("linear", ("x", "p_c1", "p_c2")), ("rotary", ("p_m1",))):
+        coarse = fit.Problem(axis, truth, [record], opts, coarse=True)
+        assert coarse.base.sim.n_sub == opts.basin_n_sub < truth.sim.n_sub
+        seg = shooting.segments_of(record, axis, opts.segment_s[axis])
+        own = shooting.simulate(truth, record, seg, {}, axis)
+        basin = shooting.simulate(coarse.base, record, seg, {}, axis)
+        for name in signals:
+            rms = float(np.sqrt(np.mean((basin[name] - own[name]) ** 2)))
+            assert 0.0 < rms < 0.25 * noise[name], (axis, name, rms, noise[name])
+    solved = fit.Problem("rotary", truth, [record], replace(opts, params=("rotary.J_m",)))
+    assert solved.solve(None, lambda _m: None).plant.sim.n_sub == truth.sim.n_sub

@@ -39,6 +39,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from pneu_msgs_py.params.core import with_updates
 
 from pneu_control.sysid import model, shooting, starts
 from pneu_control.sysid.record import AXIS_SIGNALS, Record
@@ -79,6 +80,10 @@ class FitOptions:
     settle_every: int = 2  # ... every 2nd of them
     curve: bool = True  # last stage: the valve's own curve (pneu_control.sysid.curve)
     jacobian_every: int = 3  # a Jacobian by differences every 3rd step, Broyden's between
+    # substeps per period of the replays that only look for a basin (the scans, stage 2a, the
+    # first pass of each continuation, the unexplained segments alone); every pass whose cost
+    # is compared or reported replays at the plant's own (Problem(coarse=...))
+    basin_n_sub: int | None = 5
 
 
 @dataclass
@@ -235,16 +240,38 @@ def _fit_own_curve(axis, base, records, options, fit: AxisFit, log):
         replace(options, params=(*others, *(p.name for p in knots))),
         extra=knots,
     )
-    own = _continued(prob, fit.offset_start(), log)
+    dp = len(prob.params) - len(fit.names)
+
+    def worth_solving(first: AxisFit) -> bool:
+        """The BIC on the continuation's first pass, its gain scaled to the whole record: a
+        curve that could not pay half its price there is not solved on the long segments."""
+        settle = _settle_options(options, axis)
+        cat = Problem(axis, fit.about, records, replace(settle, params=tuple(fit.names)),
+                      every=options.settle_every, coarse=True)  # fmt: skip
+        cost = cat.cost(cat.z_start(fit.start()))
+        taus = (fit.inflation, first.inflation)
+        gain, _ = _bic(cost, first.cost, first.n_residuals, taus, dp)
+        predicted = gain * len(prob.cluster) / first.n_residuals  # residuals of the record
+        _, price = _bic(cost, first.cost, len(prob.cluster), taus, dp)
+        if predicted > 0.5 * price:
+            return True
+        log(
+            f"  {axis}: own curve on the first pass: cost {first.cost:.5g} against the "
+            f"catalogue's {cost:.5g} there, a gain of {predicted:.0f} over the record "
+            f"against a price of {price:.0f} (BIC): the catalogue family kept"
+        )
+        return False
+
+    own = _continued(prob, fit.offset_start(), log, go_on=worth_solving)
+    if own is None:
+        return None
     # Kept only when the lower cost pays for the values added: Schwarz's criterion (BIC;
     # Schwarz, Ann. Statist. 6, 1978) on the effective sample, the residuals over their
     # autocorrelation time (the larger of the two fits'). A cost merely lower is what 30
     # knots find in noise and in what the catalogue family explains otherwise (the study's
     # breakaway plant: -11 %, and a mismatch warning held out).
-    dp = len(own.names) - len(fit.names)
+    gain, price = _bic(fit.cost, own.cost, own.n_residuals, (fit.inflation, own.inflation), dp)
     m_eff = own.n_residuals / max(fit.inflation, own.inflation, 1.0)
-    gain = m_eff * math.log(fit.cost / own.cost) if own.cost > 0 else math.inf
-    price = math.log(m_eff) * dp
     if not gain > price:
         log(
             f"  {axis}: own curve cost {own.cost:.5g} against {fit.cost:.5g}: "
@@ -265,6 +292,15 @@ def _fit_own_curve(axis, base, records, options, fit: AxisFit, log):
     own.wall_s += fit.wall_s
     own.curve_support = sup
     return own, prob
+
+
+def _bic(cost_before: float, cost_after: float, n: int, taus, dp: int) -> tuple[float, float]:
+    """Schwarz's criterion for ``dp`` more values: (gain, price) on the effective sample, the
+    ``n`` residuals over the larger of their autocorrelation times ``taus``; the values pay
+    when gain > price."""
+    m_eff = n / max(*taus, 1.0)
+    gain = m_eff * math.log(cost_before / cost_after) if cost_after > 0 else math.inf
+    return gain, math.log(m_eff) * dp
 
 
 # The volumes first: with the catalogue's volume the first steps of a joint fit trade the
@@ -312,7 +348,12 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
         for group in _settling_groups(axis, names, mech):
             log(f"  {axis}: stage 2a, {', '.join(group)} (the mechanics pinned)")
             held = Problem(
-                axis, base1, records, replace(settle, params=group), every=options.settle_every
+                axis,
+                base1,
+                records,
+                replace(settle, params=group),
+                every=options.settle_every,
+                coarse=True,
             ).solve(start, log)
             start = {**start, **held.start()}
     start.update(mech)
@@ -340,10 +381,16 @@ def _staged_fit(axis, base, records, options, log, stage) -> AxisFit:
     return fit2 if fit2.cost < fit.cost else fit
 
 
-def _continued(prob: Problem, start: dict[str, float], log: Callable[[str], None]) -> AxisFit:
+def _continued(
+    prob: Problem,
+    start: dict[str, float],
+    log: Callable[[str], None],
+    go_on: Callable[[AxisFit], bool] | None = None,
+) -> AxisFit | None:
     """``prob`` solved as a continuation in the shooting segments' length: first on every
     ``settle_every``-th segment of ``settle_segment_s`` (a basin to start from, at half the
-    replay), then on its own segments, from there.
+    replay), then on its own segments, from there -- unless ``go_on(first pass)`` says no
+    (then None).
 
     Over a replay of seconds a few % of inertia or friction (the equation-error start's
     error) moves the speed so far that the flow scale, supply and leakage absorb it in a
@@ -355,8 +402,16 @@ def _continued(prob: Problem, start: dict[str, float], log: Callable[[str], None
     """
     settle = _settle_options(prob.options, prob.axis)
     short = Problem(
-        prob.axis, prob.base, prob.records, settle, every=settle.settle_every, extra=prob.extra
+        prob.axis,
+        prob.base,
+        prob.records,
+        settle,
+        every=settle.settle_every,
+        extra=prob.extra,
+        coarse=True,
     ).solve(start, log)
+    if go_on is not None and not go_on(short):
+        return None
     fit = prob.solve(short.start(), log)
     return replace(
         fit,
@@ -414,8 +469,6 @@ def in_polytropic_index(fit: AxisFit, n: float, rel_sigma_n: float = 0.0) -> Axi
     c = n R T0 / V), so its volumes -- values, σ and the fitted plant -- scale by n / n_fit
     and the twin is the same (its bounds were read at n_fit); what it identifies is V/n, so
     a volume's relative variance gains n's."""
-    from pneu_msgs_py.params.core import with_updates
-
     k = n / fit.plant.ambient.n_poly
     if fit.axis != "rotary" or (k == 1.0 and rel_sigma_n == 0.0):
         return fit
@@ -453,6 +506,7 @@ def _flow_curve_start(axis, base, records, options, first, offsets, log):
         records,
         replace(options, params=first, segment_s={axis: options.short_segment_s}),
         every=options.short_every,
+        coarse=True,
     )
     z, cost = _scan_dead_band(long_, short, log, offsets)
     vals, offs = long_.unpack(z)
@@ -477,10 +531,15 @@ class Problem:
         every: int = 1,
         select: Callable[[object], bool] | None = None,
         extra: tuple[model.FitParam, ...] = (),
+        coarse: bool = False,
     ):
         """``every``: every n-th replayed segment only; ``select``: only the segments whose
         design segment (:class:`pneu_control.sysid.design.Segment`) it accepts; ``extra``:
-        parameters beyond the axis's own (a valve's curve knots)."""
+        parameters beyond the axis's own (a valve's curve knots); ``coarse``: the replays at
+        ``options.basin_n_sub`` substeps (a search for a basin: at 5 instead of 10 the outputs
+        move by a tenth of the sensors' noise, docs/calibration.md)."""
+        if coarse and options.basin_n_sub and options.basin_n_sub < base.sim.n_sub:
+            base = with_updates(base, {"sim.n_sub": options.basin_n_sub})
         self.axis, self.base, self.options = axis, base, options
         self.records, self.extra = records, tuple(extra)
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # the latest (z, residuals)

@@ -102,7 +102,7 @@ def refit_unexplained(
     start = fit.start()
     opts = replace(options, params=tuple(fit.names))
     try:
-        subs = [Problem(axis, base, [r], opts, select=sel) for r, sel in picked]
+        subs = [Problem(axis, base, [r], opts, select=sel, coarse=True) for r, sel in picked]
     except ValueError:
         return None
     # one problem over all the picked records: their residuals side by side
