@@ -147,3 +147,33 @@ def test_split_replays_are_the_serial_ones_to_the_bit(axes):
         assert np.array_equal(batch[rows[s] : rows[s + 1]], one)
         if m:
             assert np.array_equal(trace[rows[s]], states[s])
+
+
+def test_a_group_takes_work_as_it_becomes_ready():
+    """Threads started one after another (a draw's fits while the next draw is excited) run
+    beside the caller; their results come back in the order they were started."""
+    gate = threading.Event()
+    with workers.Group() as group:
+        group.start([lambda: (gate.wait(60), "first")[1]])
+        group.start([lambda: "second", lambda: "third"])
+        gate.set()  # the first thread was running while the caller went on
+        assert group.results() == ["first", "second", "third"]
+
+
+def test_a_failure_in_the_callers_thread_calls_the_group_off():
+    """An error in the caller between two starts (an excitation that fails) stops the
+    threads already started: leaving the block waits for them, and they end Cancelled."""
+    ended = []
+
+    def forever() -> None:
+        try:
+            while True:
+                workers.run_all([lambda: None, lambda: None])
+        except BaseException as e:
+            ended.append(type(e))
+            raise
+
+    with pytest.raises(RuntimeError, match="excitation"), workers.Group() as group:
+        group.start([forever])
+        raise RuntimeError("the excitation failed")
+    assert ended == [workers.Cancelled]

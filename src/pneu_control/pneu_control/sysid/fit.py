@@ -40,6 +40,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pneu_msgs_py.params.core import with_updates
+from pneu_sim.physics import workers
 
 from pneu_control.sysid import model, shooting, starts
 from pneu_control.sysid.record import AXIS_SIGNALS, Record
@@ -671,7 +672,6 @@ class Problem:
     def _differences(self, fn, z: np.ndarray, f0: np.ndarray) -> np.ndarray:
         """scipy's ``approx_derivative`` of ``fn`` at ``z`` (2-point, least_squares' steps and
         bounds), one column a task on the replay's workers (:mod:`pneu_sim.physics.workers`)."""
-        from pneu_sim.physics import workers
         from scipy.optimize._numdiff import approx_derivative  # what least_squares calls
 
         return approx_derivative(
@@ -911,10 +911,13 @@ def _scan_dead_band(
         r = short.residuals(z)
         for _ in range(steps):
             J = np.empty((len(r), len(free)))
-            for c, i in enumerate(free):
+            shifted = []
+            for i in free:
                 zq = z.copy()
                 zq[i] += 1e-2
-                J[:, c] = (short.residuals(zq) - r) / 1e-2
+                shifted.append(zq)
+            for c, r_c in enumerate(workers.map_tasks(short.residuals, shifted)):
+                J[:, c] = (r_c - r) / 1e-2
             # damped (Levenberg) and limited: a direction the short replays hardly see
             # (the cylinder's slow leakage) must not run away
             JtJ = J.T @ J

@@ -27,6 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from pneu_sim.physics import workers
 
 __all__ = ["UNEXPLAINED", "Check", "check_segments", "refit_unexplained"]
 
@@ -152,5 +153,5 @@ class _Union:
             return np.concatenate([p.residuals(zz) for p, zz in zip(self.problems, self._split(z))])
 
         opt = self.problems[0].options
-        r = least_squares(res, np.clip(z0, lo, hi), bounds=(lo, hi), method="trf", diff_step=opt.diff_step, max_nfev=opt.max_nfev, xtol=opt.xtol, ftol=opt.ftol)  # fmt: skip
+        r = least_squares(res, np.clip(z0, lo, hi), bounds=(lo, hi), method="trf", diff_step=opt.diff_step, max_nfev=opt.max_nfev, xtol=opt.xtol, ftol=opt.ftol, workers=workers.map_tasks)  # fmt: skip
         return r.x

@@ -350,33 +350,32 @@ def _replicated(base, fits: dict[str, AxisFit], recs, noise, options, log) -> di
         twin = _taken(twin, fit, [], every=True)
     twin = _with_noise(twin, noise)
     records = list({id(r): r for rs in recs.values() for r in rs}.values())
-    draws = [replicate_records(records, tuple(fits), twin, k) for k in range(REPLICATES)]
-    log(
-        f"  replicates: {REPLICATES} excitations of the identified twin, {time.perf_counter() - t0:.0f} s"
-    )
     starts, fitted_base = {}, base  # the motor's fit is written in the cylinder's values
     for axis, fit in fits.items():
         starts[axis] = fitted_base
         fitted_base = _taken(fitted_base, fit, [])
-    mine = {a: [[r for r in reps if a in r.designs] for reps in draws] for a in fits}
-    jobs = [(a, m) for a in fits if all(mine[a]) for m in mine[a]]
-    t1 = time.perf_counter()
-    again = workers.concurrently(
-        [lambda a=a, m=m: refit(a, starts[a], m, fits[a], options) for a, m in jobs]
-    )
+    jobs = []  # (axis, draw): each draw's fits start while the next draw is excited
+    with workers.Group() as group:
+        for k in range(REPLICATES):
+            reps = replicate_records(records, tuple(fits), twin, k)
+            for axis in fits:
+                mine = [r for r in reps if axis in r.designs]
+                if mine:
+                    jobs.append((axis, k))
+                    group.start([lambda a=axis, m=mine: refit(a, starts[a], m, fits[a], options)])
+        again = group.results()
     out = {}
     for axis, fit in fits.items():
-        mine_again = [d for (a, _m), d in zip(jobs, again) if a == axis]
-        if not mine_again:
+        mine_again = [d for (a, _k), d in zip(jobs, again) if a == axis]
+        if len(mine_again) < REPLICATES:
             log(f"  {axis}: no design in the bags: intervals from the fit alone (no replicate)")
             out[axis] = fit
             continue
         log(f"  {axis}: fitted again on each: " + ", ".join(f"{d.nfev} steps" for d in mine_again))
         out[axis] = with_replicate(fit, mine_again)
-    log(f"  the {len(jobs)} fits again, at once: {time.perf_counter() - t1:.0f} s")
     log(
-        "  replicate on the identified twin (excited and fitted again): "
-        f"{time.perf_counter() - t0:.0f} s"
+        f"  replicate on the identified twin ({REPLICATES} excitations, {len(jobs)} fits again, "
+        f"each draw's fits beside the next draw's excitation): {time.perf_counter() - t0:.0f} s"
     )
     return out
 

@@ -14,7 +14,7 @@ Two rules keep it simple:
 - results do not depend on the scheduling: each task writes its own rows or
   returns its own value, in the caller's order.
 
-Work started by :func:`concurrently` is called off as a whole -- when one of its
+Work started by :func:`concurrently` (or a :class:`Group`) is called off as a whole -- when one of its
 tasks fails, or the caller is interrupted (Ctrl-C) -- at the next replay any of its
 threads starts (:class:`Cancelled`), so an interrupted command ends within a
 replay, not after the work.
@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from typing import Any
 
-__all__ = ["Cancelled", "concurrently", "in_worker", "map_tasks", "run_all", "size"]
+__all__ = ["Cancelled", "Group", "concurrently", "in_worker", "map_tasks", "run_all", "size"]
 
 _LOCK = threading.Lock()
 _POOL: ThreadPoolExecutor | None = None
@@ -99,30 +99,53 @@ def map_tasks(fn: Callable[[Any], Any], items: Iterable[Any]) -> list[Any]:
     return run_all([lambda x=x: fn(x) for x in items])
 
 
+class Group:
+    """Threads started as their work becomes ready (:meth:`start`), joined at the end
+    (:meth:`results`); the first failure calls the rest off and is raised, and so is an
+    interruption of the caller (Ctrl-C) -- leaving the ``with`` block waits until every thread
+    has stopped, which each does at its next replay."""
+
+    def __init__(self) -> None:
+        self._stop = threading.Event()
+        self._chain = (*_events(), self._stop)
+        self._ex = ThreadPoolExecutor(thread_name_prefix="pneu-task", max_workers=64)
+        self._futures: list = []
+
+    def __enter__(self) -> Group:
+        return self
+
+    def __exit__(self, kind, _value, _tb) -> None:
+        if kind is not None:
+            self._stop.set()
+        self._ex.shutdown(wait=True)
+
+    def start(self, tasks: list[Callable[[], Any]]) -> None:
+        """Each of ``tasks`` on a thread of its own, now (its replays on the pool)."""
+        _check(self._chain)
+
+        def run(task: Callable[[], Any]) -> Any:
+            _LOCAL.cancel = self._chain
+            return task()
+
+        self._futures.extend(self._ex.submit(run, t) for t in tasks)
+
+    def results(self) -> list[Any]:
+        """Every started task's result, in the order started."""
+        wait(self._futures, return_when=FIRST_EXCEPTION)
+        failed = [f for f in self._futures if f.done() and f.exception() is not None]
+        if failed:
+            self._stop.set()
+            wait(self._futures)
+            firsts = [f.exception() for f in failed if not isinstance(f.exception(), Cancelled)]
+            raise (firsts or [failed[0].exception()])[0]
+        return [f.result() for f in self._futures]
+
+
 def concurrently(tasks: list[Callable[[], Any]]) -> list[Any]:
     """Each of ``tasks`` on a thread of its own (their replays on the pool), their results
-    in order. The first failure calls the others off and is raised; so is an interruption
-    of the caller, once every thread has stopped."""
+    in order (:class:`Group`)."""
     if len(tasks) <= 1:
         return [t() for t in tasks]
-    stop = threading.Event()
-    chain = (*_events(), stop)
-
-    def run(task: Callable[[], Any]) -> Any:
-        _LOCAL.cancel = chain
-        return task()
-
-    with ThreadPoolExecutor(len(tasks), thread_name_prefix="pneu-task") as ex:
-        futures = [ex.submit(run, t) for t in tasks]
-        try:
-            wait(futures, return_when=FIRST_EXCEPTION)
-        except BaseException:
-            stop.set()  # the threads stop at their next replay; leaving the block waits
-            raise
-        failed = [f for f in futures if f.done() and f.exception() is not None]
-        if failed:
-            stop.set()
-    if failed:
-        firsts = [f.exception() for f in failed if not isinstance(f.exception(), Cancelled)]
-        raise (firsts or [failed[0].exception()])[0]
-    return [f.result() for f in futures]
+    with Group() as group:
+        group.start(tasks)
+        return group.results()
