@@ -141,3 +141,22 @@ def test_stable_at_the_stiff_end_of_stroke():
     assert s.p_c2 == pytest.approx(p.supply.p_s_linear, rel=1e-6)
     assert s.p_c1 == pytest.approx(p.ambient.p_a, rel=1e-6)
     assert math.isfinite(s.p_m1) and s.omega > 0
+
+
+@pytest.mark.parametrize("n", [1.0, 1.05, 1.2, 1.35, 1.4])
+def test_the_polytropic_factor_is_pow_to_rounding(n):
+    """(V_old/V_new)^n by its series (the cylinder's volume step, every substep) is pow's to
+    one unit in the last place wherever it sums the series, compiled and as Python, and is
+    pow itself beyond."""
+    rng = np.random.default_rng(7)
+    V_new = 10 ** rng.uniform(-5.5, -3.5, 4000)  # dead volume .. full chamber, m^3
+    d = rng.uniform(-k.POLY_SERIES, k.POLY_SERIES, 4000)
+    d[:4] = (0.0, 1e-12, 0.999 * k.POLY_SERIES, -0.999 * k.POLY_SERIES)
+    for V, dd in zip(V_new, d):
+        V_old = V * (1.0 + dd)
+        want = (V_old / V) ** n
+        for f in (k.polytropic_factor, k.polytropic_factor.py_func):
+            assert abs(f(V_old, V, n) - want) <= np.spacing(want)
+    for dd in (1.01 * k.POLY_SERIES, 0.05, -0.05):
+        V_old = 1e-5 * (1.0 + dd)
+        assert k.polytropic_factor(V_old, 1e-5, n) == (V_old / 1e-5) ** n
