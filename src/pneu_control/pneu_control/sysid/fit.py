@@ -244,24 +244,7 @@ def _fit_own_curve(axis, base, records, options, fit: AxisFit, log):
     dp = len(prob.params) - len(fit.names)
 
     def worth_solving(first: AxisFit) -> bool:
-        """The BIC on the continuation's first pass, its gain scaled to the whole record: a
-        curve that could not pay half its price there is not solved on the long segments."""
-        settle = _settle_options(options, axis)
-        cat = Problem(axis, fit.about, records, replace(settle, params=tuple(fit.names)),
-                      every=options.settle_every, coarse=True)  # fmt: skip
-        cost = cat.cost(cat.z_start(fit.start()))
-        taus = (fit.inflation, first.inflation)
-        gain, _ = _bic(cost, first.cost, first.n_residuals, taus, dp)
-        predicted = gain * len(prob.cluster) / first.n_residuals  # residuals of the record
-        _, price = _bic(cost, first.cost, len(prob.cluster), taus, dp)
-        if predicted > 0.5 * price:
-            return True
-        log(
-            f"  {axis}: own curve on the first pass: cost {first.cost:.5g} against the "
-            f"catalogue's {cost:.5g} there, a gain of {predicted:.0f} over the record "
-            f"against a price of {price:.0f} (BIC): the catalogue family kept"
-        )
-        return False
+        return _pays_on_first_pass(prob, fit, records, first, dp, log)
 
     own = _continued(prob, fit.offset_start(), log, go_on=worth_solving)
     if own is None:
@@ -293,6 +276,30 @@ def _fit_own_curve(axis, base, records, options, fit: AxisFit, log):
     own.wall_s += fit.wall_s
     own.curve_support = sup
     return own, prob
+
+
+def _pays_on_first_pass(prob: Problem, fit: AxisFit, records, first: AxisFit, dp: int, log) -> bool:
+    """The BIC of an own curve (``prob``, ``dp`` values more than the catalogue family's
+    ``fit``) on its continuation's first pass ``first``, the gain scaled to the whole
+    record: a curve that could not pay half its price there is not solved on the long
+    segments."""
+    axis, options = prob.axis, prob.options
+    settle = _settle_options(options, axis)
+    cat = Problem(axis, fit.about, records, replace(settle, params=tuple(fit.names)),
+                  every=options.settle_every, coarse=True)  # fmt: skip
+    cost = cat.cost(cat.z_start(fit.start()))
+    taus = (fit.inflation, first.inflation)
+    gain, _ = _bic(cost, first.cost, first.n_residuals, taus, dp)
+    predicted = gain * len(prob.cluster) / first.n_residuals  # residuals of the record
+    _, price = _bic(cost, first.cost, len(prob.cluster), taus, dp)
+    if predicted > 0.5 * price:
+        return True
+    log(
+        f"  {axis}: own curve on the first pass: cost {first.cost:.5g} against the "
+        f"catalogue's {cost:.5g} there, a gain of {predicted:.0f} over the record "
+        f"against a price of {price:.0f} (BIC): the catalogue family kept"
+    )
+    return False
 
 
 def _bic(cost_before: float, cost_after: float, n: int, taus, dp: int) -> tuple[float, float]:
@@ -906,26 +913,7 @@ def _scan_dead_band(
     )
 
     def floor(zd: float, z: np.ndarray, steps: int = 2) -> np.ndarray:
-        z = z.copy()
-        z[i_d] = zd
-        r = short.residuals(z)
-        for _ in range(steps):
-            J = np.empty((len(r), len(free)))
-            shifted = []
-            for i in free:
-                zq = z.copy()
-                zq[i] += 1e-2
-                shifted.append(zq)
-            for c, r_c in enumerate(workers.map_tasks(short.residuals, shifted)):
-                J[:, c] = (r_c - r) / 1e-2
-            # damped (Levenberg) and limited: a direction the short replays hardly see
-            # (the cylinder's slow leakage) must not run away
-            JtJ = J.T @ J
-            damp = 1e-3 * np.diag(np.diag(JtJ)) + 1e-12 * np.eye(len(free))
-            step = np.clip(np.linalg.solve(JtJ + damp, -J.T @ r), -1.0, 1.0)
-            z[free] = np.clip(z[free] + step, lo[free], hi[free])
-            r = short.residuals(z)
-        return z
+        return _valley_floor(short, i_d, free, zd, z, steps)
 
     # continuation: converge at the start's dead band, then walk the valley floor both ways
     z0 = floor(float(np.clip(z[i_d], lo[i_d], hi[i_d])), z, steps=5)
@@ -958,6 +946,35 @@ def _scan_dead_band(
         f"cost {best[0]:.5g} ({time.perf_counter() - t0:.0f} s)"
     )
     return best[1], best[0]
+
+
+def _valley_floor(
+    short: Problem, i_d: int, free: list[int], zd: float, z: np.ndarray, steps: int
+) -> np.ndarray:
+    """``z`` with the dead band at ``zd`` and the ``free`` coordinates on ``short``'s valley
+    floor: ``steps`` damped Gauss-Newton steps (the difference columns on the replay's
+    workers)."""
+    lo, hi = short.lo, short.hi
+    z = z.copy()
+    z[i_d] = zd
+    r = short.residuals(z)
+    for _ in range(steps):
+        J = np.empty((len(r), len(free)))
+        shifted = []
+        for i in free:
+            zq = z.copy()
+            zq[i] += 1e-2
+            shifted.append(zq)
+        for c, r_c in enumerate(workers.map_tasks(short.residuals, shifted)):
+            J[:, c] = (r_c - r) / 1e-2
+        # damped (Levenberg) and limited: a direction the short replays hardly see
+        # (the cylinder's slow leakage) must not run away
+        JtJ = J.T @ J
+        damp = 1e-3 * np.diag(np.diag(JtJ)) + 1e-12 * np.eye(len(free))
+        step = np.clip(np.linalg.solve(JtJ + damp, -J.T @ r), -1.0, 1.0)
+        z[free] = np.clip(z[free] + step, lo[free], hi[free])
+        r = short.residuals(z)
+    return z
 
 
 def _pivots(axis: str, base, params, used) -> list[tuple[int, Callable[[list[float]], float]]]:
