@@ -696,7 +696,6 @@ class Problem:
         return 0.5 * float(r @ r)
 
     def solve(self, start: dict[str, float] | None, log: Callable[[str], None]) -> AxisFit:
-
         axis, params = self.axis, self.params
         z0 = self.z_start(start)
         t0 = time.perf_counter()
@@ -732,16 +731,16 @@ class Problem:
         least squares problems*, 2004, sec. 3.4). A Jacobian by differences costs a replay per
         parameter; an update, none.
 
-        A solve that stops on an updated Jacobian (its steps may have shrunk on the
-        update's error, not at the optimum) starts again from there on a fresh one, until a
-        restart gains less than ``ftol``; the result carries the fresh Jacobian at the
-        optimum (the statistics read it). ``jacobian_every`` = 1 is plain trf."""
+        A step so small that trf may stop on it gets a fresh Jacobian; a solve that trf
+        stops on a step taken from an updated one (its steps may have shrunk on the
+        update's error, not at the optimum) starts again from there on a fresh one. The
+        result carries a fresh Jacobian at the optimum (the statistics read it).
+        ``jacobian_every`` = 1 is plain trf."""
         from scipy.optimize import least_squares
 
         opt = self.options
         seen: list[tuple[np.ndarray, np.ndarray]] = []  # evaluated since the last Jacobian
-        # the Jacobian in use (at x, f), whether by differences, updates since; whether the
-        # latest point evaluated was a step taken from a Jacobian by differences
+        # J at (x, f); fresh: by differences; age: updates since; trial: a fresh J's step
         now: dict = {"x": None, "f": None, "J": None, "fresh": False, "age": 0, "trial": True}
 
         def evaluated(z: np.ndarray) -> np.ndarray:
@@ -760,7 +759,9 @@ class Problem:
             seen_now = list(seen)
             seen.clear()
             if J0 is not None and np.array_equal(x0, z):  # a restart where the last solve ended
-                return J0 if now["fresh"] else differenced(z, f)
+                J = J0 if now["fresh"] else differenced(z, f)
+                now["trial"] = True  # a stop before any step is a stop on a fresh Jacobian
+                return J
             stale = J0 is None or now["age"] + 1 >= opt.jacobian_every
             if not stale:
                 c0, c = float(f0 @ f0), float(f @ f)

@@ -255,7 +255,7 @@ def identify(
         return fit
 
     # the replay's workers run every core (pneu_sim.physics.workers): BLAS threads beside
-    # them only wait for cores (OpenBLAS's spin: a quarter more CPU, a fifth more wall time)
+    # them only wait for cores, and OpenBLAS's spin after every call (docs/calibration.md)
     with threadpool_limits(1, "blas"):
         # both axes at once: they share no fitted value (the motor sees the cylinder's n
         # only as n/V, so its fit runs at the base's n and is written in the cylinder's)

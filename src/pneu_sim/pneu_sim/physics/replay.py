@@ -406,7 +406,9 @@ def replay_segments(
     return out
 
 
-_MIN_CHUNK = 2000  # periods: below this a chunk costs more to hand over than to replay
+# periods: a smaller chunk is not worth a hand-over (estimated: handing a task to a thread
+# costs tens of µs, 2000 periods of replay about a millisecond)
+_MIN_CHUNK = 2000
 
 
 def _chunks(lengths: np.ndarray, k: int) -> list[np.ndarray]:
