@@ -26,11 +26,18 @@ def markers(block: str) -> tuple[str, str]:
 
 
 def split_table(text: str) -> dict[str, str]:
-    """paper_table.md -> {"nominal": ..., "uncertainty": ...} (the latter only if present)."""
+    """paper_table.md -> {"nominal": ..., "uncertainty": ...} (the latter only if present).
+
+    The band tables come under pneu paper's own heading ("## Over N plant samples
+    (uncertainty/)"); the page has its section heading, so that line is not copied.
+    """
     nominal, _, rest = text.strip("\n").partition("\n\n")
     parts = {"nominal": nominal.strip("\n")}
-    if rest.strip():
-        parts["uncertainty"] = rest.strip("\n")
+    rest = rest.strip("\n")
+    if rest.startswith("## "):
+        rest = rest.partition("\n")[2].strip("\n")
+    if rest:
+        parts["uncertainty"] = rest
     return parts
 
 

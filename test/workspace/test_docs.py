@@ -344,9 +344,11 @@ def test_results_doc_tool_replaces_only_inside_the_markers(tmp_path):
     begin, end = tool.markers("nominal")
     assert new[: new.index(begin)] == doc[: doc.index(begin)]
     assert new[new.index(end) :] == doc[doc.index(end) :]
-    # with the band table appended (as pneu paper --uncertainty does): both replaced
+    # with the band table appended under its heading (as pneu paper --uncertainty does):
+    # both replaced, the heading left out (the page has its own)
     (tmp_path / "both.md").write_text(
-        nominal + "\nOver 3 plant samples\n\n| a |\n", encoding="utf-8"
+        nominal + "\n## Over 3 plant samples (uncertainty/)\n\nOver 3 plant samples\n\n| a |\n",
+        encoding="utf-8",
     )
     assert tool.main([str(tmp_path / "both.md"), str(target)]) == 0
     assert tool.block_text(target.read_text(encoding="utf-8"), "uncertainty") == (
