@@ -411,19 +411,19 @@ def replay_segments(
 _MIN_CHUNK = 2000
 
 
-def _chunks(lengths: np.ndarray, k: int) -> list[np.ndarray]:
-    """The segments' indices in at most ``k`` chunks of nearly equal periods (longest
+def _chunks(lengths: np.ndarray, n_max: int) -> list[np.ndarray]:
+    """The segments' indices in at most ``n_max`` chunks of nearly equal periods (longest
     first, each to the lightest chunk), each in ascending order."""
-    k = int(min(k, max(1, lengths.sum() // _MIN_CHUNK), len(lengths)))
-    if k <= 1:
+    m = int(min(n_max, max(1, lengths.sum() // _MIN_CHUNK), len(lengths)))
+    if m <= 1:
         return [np.arange(len(lengths))]
-    load = np.zeros(k)
+    load = np.zeros(m)
     owner = np.empty(len(lengths), dtype=np.int64)
     for i in np.argsort(-lengths, kind="stable").tolist():
         j = int(np.argmin(load))
         owner[i] = j
         load[j] += lengths[i]
-    return [np.flatnonzero(owner == j) for j in range(k)]
+    return [np.flatnonzero(owner == j) for j in range(m)]
 
 
 # the compiled functions above inline the kernel (another file): keep their caches in step
